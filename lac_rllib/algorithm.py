@@ -1,0 +1,114 @@
+"""LAC(Algorithm): Algorithm 2 of the paper on RLlib's new API stack.
+
+One ``training_step`` = one iteration k of Algorithm 2:
+  1. sample ``env_steps_per_iteration`` steps with the generator π_φ (uniform random actions
+     in the first ``random_iterations`` iterations [C]);
+  2. store them in an ``EpisodeReplayBuffer`` (it keeps infos, hence the per-step cost);
+  3. ν update (eq. 14) from the episodes completed in this batch, inside the Learner, before
+  4. one pass of minibatches over the whole buffer in a single ``learner_group.update`` call
+     (NOTES.md: each call costs ~0.1 s, so not one call per minibatch).
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+
+import numpy as np
+from ray.rllib.algorithms.algorithm import Algorithm
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.execution.rollout_ops import synchronous_parallel_sample
+from ray.rllib.utils.metrics import (
+    ENV_RUNNER_RESULTS,
+    LEARNER_RESULTS,
+    NUM_ENV_STEPS_SAMPLED_LIFETIME,
+)
+from ray.rllib.utils.replay_buffers.episode_replay_buffer import EpisodeReplayBuffer
+from ray.tune.registry import register_env
+
+from lac_rllib.config import LACConfig
+from lac_rllib.connectors import completed_episode_stats
+from lac_rllib.learner import TS_EPISODE_COST, TS_ITERATION
+from lac_rllib.tasks import get_task
+
+# Top-level result keys, declared once (the sweep service and the trainer read these).
+EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU = (
+    "episode_return", "episode_cost", "cost_limit", "feasible", "nu")
+EPISODES_THIS_ITER, ENV_STEPS = "episodes_this_iter", "env_steps"
+
+
+def make_task_env(env_config, task_id: str):
+    return get_task(task_id).make(env_config)
+
+
+def register_task_env(task_id: str) -> None:
+    """Make ``task_id`` resolvable by RLlib env runners in every Ray process."""
+    register_env(task_id, functools.partial(make_task_env, task_id=task_id))
+
+
+class LAC(Algorithm):
+    @classmethod
+    def get_default_config(cls) -> LACConfig:
+        return LACConfig(cls)
+
+    def setup(self, config) -> None:
+        if config.task_id:
+            register_task_env(config.task_id)
+        super().setup(config)
+        self.replay_buffer = EpisodeReplayBuffer(capacity=self.config.replay_capacity)
+        self._last_episode_stats = (float("nan"), float("nan"))
+
+    def training_step(self) -> None:
+        cfg = self.config
+        episodes, runner_results = synchronous_parallel_sample(
+            worker_set=self.env_runner_group,
+            max_env_steps=cfg.env_steps_per_iteration,
+            random_actions=self.iteration < cfg.random_iterations,
+            sample_timeout_s=cfg.sample_timeout_s,
+            _uses_new_env_runners=True,
+            _return_metrics=True,
+        )
+        self.metrics.aggregate(runner_results, key=ENV_RUNNER_RESULTS)
+        returns, costs = completed_episode_stats(episodes)
+        for episode in episodes:
+            # LAC never reads logp/dist inputs (off-policy, its own targets); and chunks of
+            # random-action iterations have none, so a chunk from each side of the switch
+            # could not be concatenated in the buffer. Dropping them saves memory too.
+            episode.extra_model_outputs.clear()
+        self.replay_buffer.add(episodes)
+
+        n_rows = self.replay_buffer.get_num_timesteps()
+        learner_results = self.learner_group.update(
+            # Shallow copies: the learner connector renames episode ids in place
+            # (AddObservationsFromEpisodesToBatch appends "_i"), which would break the
+            # buffer's id → episode map when the next chunk of an ongoing episode arrives.
+            episodes=[copy.copy(e) for e in self.replay_buffer.episodes],
+            timesteps={
+                NUM_ENV_STEPS_SAMPLED_LIFETIME: self.metrics.peek(
+                    (ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0),
+                # eq. (14) uses only episodes that completed in this batch [C].
+                TS_EPISODE_COST: float(np.mean(costs)) if costs else None,
+                TS_ITERATION: self.iteration,
+            },
+            minibatch_size=cfg.lac_minibatch_size,
+            num_total_minibatches=max(1, int(cfg.gradient_passes * n_rows / cfg.lac_minibatch_size)),
+        )
+        self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
+        self.env_runner_group.sync_weights(
+            from_worker_or_learner_group=self.learner_group, inference_only=True)
+        self._log_top_level(returns, costs)
+
+    def _log_top_level(self, returns, costs) -> None:
+        """episode_return / episode_cost: means over the episodes completed this iteration
+        (the last known values carry over an iteration in which none completed)."""
+        if returns:
+            self._last_episode_stats = (float(np.mean(returns)), float(np.mean(costs)))
+        ret, cost = self._last_episode_stats
+        limit = self.config.effective_cost_limit
+        nu = self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, NU), default=float("nan"))
+        for key, value in {
+            EPISODE_RETURN: ret, EPISODE_COST: cost, COST_LIMIT: limit,
+            FEASIBLE: float(cost <= limit), NU: float(nu), EPISODES_THIS_ITER: len(returns),
+            ENV_STEPS: self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0),
+        }.items():
+            self.metrics.log_value(key, value, window=1)

@@ -1,0 +1,300 @@
+"""LACConfig: every field of ``../shared/SPEC.md`` declared once, with its default and source.
+
+Fields live in the :class:`LACParams` dataclass below, one docstring each; ``LACConfig`` copies
+them onto itself, so ``config.langevin_steps`` works like any RLlib field and
+``config.training(langevin_steps=50)`` sets it. Values are checked as they are set, so bad
+input fails before Ray starts. Source tags: [P] paper, [C] authors' code, [F] FOCOPS, [D] ours.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
+from ray.rllib.connectors.env_to_module.mean_std_filter import MeanStdFilter
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+from lac_rllib.tasks import get_task
+
+START_MODES = ("informative", "noninformative")
+CHAIN_AT = ("next", "current")
+
+
+@dataclasses.dataclass
+class LACParams:
+    """The LAC hyperparameters (SPEC §1-5). Defaults are the MuJoCo column of SPEC §5."""
+
+    # --- Langevin chain (SPEC §1, Algorithm 1) ---
+    langevin_steps: int = 30
+    """T, Langevin steps per chain [P Tables 4-5]. Integer ≥ 1."""
+    langevin_step_size: float = 1e-4
+    """η, the step size of eq. (9) [P]. > 0."""
+    temperature: float = 1e-3
+    """λ, the fixed temperature of the energy [P Tables 4-5]. > 0."""
+    langevin_start: str = "informative"
+    """"informative": ã₀ ~ π_φ'(·|s) (eq. 11) [P, C]; "noninformative": ã₀ ~ N(0, I) (ablation NI)."""
+    logp_weight: float = 1.0
+    """w, the weight of −log π_φ' in the energy [P; C's flag is pinned to 1 by a bug]. ≥ 0."""
+    langevin_clamp: bool = True
+    """Clamp ã to the action bounds after every step [C]."""
+    langevin_grad_clip: float | None = None
+    """Per-sample L2 clip of ∇_a E; None = off [D: C's minibatch-wide norm couples samples]."""
+
+    # --- critics (SPEC §2, eqs. 12-13) ---
+    cost_gamma: float = 0.99
+    """γ_C, cost discount in the cost critic's target [C; D: γ_C = 1 leaves Q_C unbounded]."""
+    reward_scale: float = 10.0
+    """k_r, multiplies the reward in the reward critic's target [C]; cost is unscaled."""
+    bootstrap_on_truncation: bool = True
+    """Bootstrap through time-limit truncation [D]; False treats it as terminal, like [C]."""
+    critic_lr: float = 3e-4
+    """Adam learning rate of the four critics [P]."""
+    critic_hidden: tuple = (256, 256, 256)
+    """Hidden layers of each critic (obs+act → Mish MLP → Q) [C]."""
+
+    # --- actor (SPEC §3, eqs. 15-16) ---
+    beta: float = 0.0
+    """β, weight of KL(π_φ ‖ π_φ') in the actor loss eq. (16) [C: 0; P Table 3 "PR"]. ≥ 0."""
+    actor_chain_at: str = "next"
+    """Where the actor's target chain runs: "next" reuses the critic chain at s' [C];
+    "current" runs a second chain at s as eq. (15) writes [P]."""
+    actor_lr: float = 3e-4
+    """Adam learning rate of the generator actor [P]."""
+    actor_grad_clip: float | None = 40.0
+    """Global gradient-norm clip of the actor [C]; None = off."""
+    actor_update_start_iteration: int = 1
+    """First training iteration (0-based) whose minibatches update the actor [C: after the first]."""
+    actor_hidden: tuple = (256, 256)
+    """Hidden layers of the Gaussian generator actor [P Tables 4-5]."""
+    actor_activation: str = "tanh"
+    """Activation of the actor MLP [P Tables 4-5]."""
+    log_std_init: float = -0.5
+    """Initial state-independent log-std of the actor [P Tables 4-5]."""
+
+    # --- Lagrange multiplier (SPEC §4, eq. 14) ---
+    nu_init: float = 0.0
+    """ν₀ [P, C]. ≥ 0."""
+    nu_lr: float = 0.01
+    """α_ν, step of the projected ν update eq. (14) [P, C]. ≥ 0 (0 pins ν at ν₀)."""
+    nu_max_adaptive: bool = False
+    """[C]'s upper bound ν ≤ 2·|mean y_R|/|mean y_C| (2 at first). Off by default [P has none]."""
+
+    # --- data and schedule (SPEC §5) ---
+    env_steps_per_iteration: int = 5000
+    """Env steps sampled per iteration ("batch size" in Tables 4-5) [P]."""
+    replay_capacity: int = 50_000
+    """Replay buffer capacity in env steps [P, C]."""
+    lac_minibatch_size: int = 256
+    """Minibatch size of the gradient steps [P]."""
+    gradient_passes: float = 1.0
+    """Passes over the buffer per iteration ("1 epoch") [P, C]: ≈ buffer/minibatch steps."""
+    polyak_tau: float = 0.005
+    """Polyak τ for all target networks, applied after every gradient step [C]."""
+    random_iterations: int = 5
+    """Iterations that act uniformly at random before the generator takes over [C]."""
+    obs_normalization: bool = True
+    """Running mean/std observation filter [C]; its state is checkpointed."""
+    obs_clip: float = 5.0
+    """Clip of the normalised observation [C]."""
+
+    # --- task ---
+    cost_limit: float | None = None
+    """b; None = the task's limit (SPEC §6)."""
+    episode_cost_discount: float | None = None
+    """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (SPEC §6)."""
+
+
+
+
+def field_docs() -> dict[str, str]:
+    """Each field's docstring, read from the source above (the single place it is written)."""
+    import ast
+    import inspect
+
+    body = ast.parse(inspect.getsource(LACParams)).body[0].body
+    docs = {}
+    for node, nxt in zip(body, body[1:]):
+        if isinstance(node, ast.AnnAssign) and isinstance(nxt, ast.Expr):
+            docs[node.target.id] = " ".join(str(nxt.value.value).split())
+    return docs
+
+# Table 4 (MuJoCo) and Table 5 (Safety Gym); "tiny" sizes the built-in test task for minutes.
+PRESETS: dict[str, dict[str, Any]] = {
+    "mujoco": {"env_steps_per_iteration": 5000},
+    "safety_gym": {"env_steps_per_iteration": 20_000},
+    "tiny": {
+        "env_steps_per_iteration": 1000,
+        "replay_capacity": 10_000,
+        "langevin_steps": 10,
+        "actor_hidden": (64, 64),
+        "critic_hidden": (64, 64),
+        "random_iterations": 2,
+        "gradient_passes": 0.5,
+    },
+}
+
+
+def check_field(name: str, value: Any) -> None:
+    """Raise a ValueError naming the field and its accepted values if ``value`` is bad."""
+
+    def bad(accepted: str):
+        raise ValueError(f"LAC config field {name}={value!r} is invalid; accepted: {accepted}")
+
+    def real(x) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+    positive = {"langevin_step_size", "temperature", "critic_lr", "actor_lr", "obs_clip",
+                "gradient_passes"}
+    non_negative = {"logp_weight", "beta", "nu_init", "nu_lr", "reward_scale"}
+    pos_int = {"langevin_steps", "env_steps_per_iteration", "replay_capacity", "lac_minibatch_size"}
+    if name in pos_int and not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        bad("an integer >= 1")
+    if name in positive and not (real(value) and value > 0):
+        bad("a finite number > 0")
+    if name in non_negative and not (real(value) and value >= 0):
+        bad("a finite number >= 0")
+    if name in ("random_iterations", "actor_update_start_iteration") and not (
+        isinstance(value, int) and value >= 0
+    ):
+        bad("an integer >= 0")
+    if name in ("cost_gamma", "episode_cost_discount") and value is not None and not (
+        real(value) and 0 < value <= 1
+    ):
+        bad("a number in (0, 1]")
+    if name == "polyak_tau" and not (real(value) and 0 < value <= 1):
+        bad("a number in (0, 1]")
+    if name in ("langevin_grad_clip", "actor_grad_clip", "cost_limit") and value is not None and not (
+        real(value) and value > 0 or (name == "cost_limit" and real(value) and value >= 0)
+    ):
+        bad("None or a finite number > 0" if name != "cost_limit" else "None or a number >= 0")
+    if name == "langevin_start" and value not in START_MODES:
+        bad(" | ".join(START_MODES))
+    if name == "actor_chain_at" and value not in CHAIN_AT:
+        bad(" | ".join(CHAIN_AT))
+    if name in ("actor_hidden", "critic_hidden") and not (
+        len(tuple(value)) >= 1 and all(isinstance(h, int) and h >= 1 for h in value)
+    ):
+        bad("a non-empty sequence of integers >= 1")
+
+
+class LACConfig(AlgorithmConfig):
+    """Config for :class:`lac_rllib.algorithm.LAC`. See :class:`LACParams` for the fields.
+
+    ``LACConfig().task("SafetyPointGoal1-v0")`` sets the env, its cost convention and the
+    task's preset (SPEC Table 4 or 5); explicit ``training(...)`` values win over presets.
+    """
+
+    def __init__(self, algo_class=None):
+        from lac_rllib.algorithm import LAC
+
+        super().__init__(algo_class=algo_class or LAC)
+        for f in dataclasses.fields(LACParams):
+            setattr(self, f.name, f.default)
+        self.task_id: str | None = None
+        self.preset_name: str | None = None
+        # RLlib fields with LAC's values.
+        self.gamma = 0.99  # [P]
+        self.train_batch_size_per_learner = self.lac_minibatch_size
+        self.clip_actions = True  # the env clips; the actor is unsquashed [C]
+        self.normalize_actions = False
+        self.rollout_fragment_length = "auto"
+        self.num_env_runners = 0
+        from lac_rllib.connectors import EpisodeCostCallback
+
+        self.callbacks_class = EpisodeCostCallback
+
+    def training(self, **kwargs) -> "LACConfig":
+        own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELD_NAMES}
+        super().training(**kwargs)
+        for name, value in own.items():
+            if value is NotProvided:
+                continue
+            if name in ("actor_hidden", "critic_hidden"):
+                value = tuple(value)
+            check_field(name, value)
+            setattr(self, name, value)
+        if "lac_minibatch_size" in own:
+            self.train_batch_size_per_learner = self.lac_minibatch_size
+        return self
+
+    def task(self, task_id: str, *, preset: str | None = None) -> "LACConfig":
+        """Train on a registered safe task; apply its LAC preset (or ``preset``) first."""
+        spec = get_task(task_id)  # unknown id -> ValueError listing the known ones
+        name = preset or spec.preset
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(PRESETS)}")
+        self.task_id, self.preset_name = task_id, name
+        self.training(**PRESETS[name], **getattr(spec, "overrides", {}))
+        from lac_rllib.algorithm import register_task_env
+
+        register_task_env(task_id)
+        self.environment(env=task_id)
+        return self
+
+    # ----- derived values -----
+    @property
+    def task_spec(self):
+        return get_task(self.task_id) if self.task_id else None
+
+    @property
+    def effective_cost_limit(self) -> float:
+        if self.cost_limit is not None:
+            return float(self.cost_limit)
+        if self.task_spec is None:
+            raise ValueError("cost_limit is unset and no task is set: call .task(id) or set it")
+        return float(self.task_spec.cost_limit)
+
+    @property
+    def effective_episode_cost_discount(self) -> float:
+        if self.episode_cost_discount is not None:
+            return float(self.episode_cost_discount)
+        return float(self.task_spec.episode_cost_discount) if self.task_spec else 1.0
+
+    def lac_params(self) -> dict[str, Any]:
+        """The LAC fields as a plain dict (for run metadata and the RLModule)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(LACParams)}
+
+    # ----- RLlib hooks -----
+    def validate(self) -> None:
+        super().validate()
+        for name, value in self.lac_params().items():
+            check_field(name, value)
+        self.effective_cost_limit  # noqa: B018  (raises if undefined)
+
+    def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
+        # "auto" splits env_steps_per_iteration (not the minibatch size) over the runners.
+        if self.rollout_fragment_length != "auto":
+            return self.rollout_fragment_length
+        n = self.num_envs_per_env_runner * (self.num_env_runners or 1)
+        base, extra = divmod(self.env_steps_per_iteration, n)
+        idx = max(worker_index - 1, 0)
+        return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
+
+    def build_env_to_module_connector(self, env=None, spaces=None, device=None):
+        pipeline = super().build_env_to_module_connector(env=env, spaces=spaces, device=device)
+        if self.obs_normalization:
+            # Running mean/std, clipped [C]. It writes the normalised observation back into
+            # the episode, so replay and learner see what the actor saw; its state is part of
+            # the env runners' state, hence of every checkpoint.
+            pipeline.prepend(MeanStdFilter(clip_by_value=self.obs_clip))
+        return pipeline
+
+    def get_default_rl_module_spec(self) -> RLModuleSpec:
+        from lac_rllib.module import LACTorchRLModule
+
+        return RLModuleSpec(module_class=LACTorchRLModule)
+
+    def get_default_learner_class(self):
+        from lac_rllib.learner import LACTorchLearner
+
+        return LACTorchLearner
+
+    @property
+    def _model_config_auto_includes(self) -> dict[str, Any]:
+        # The module needs the network sizes and the chain's settings (it runs the chain).
+        return {**super()._model_config_auto_includes, **self.lac_params()}
+
+
+FIELD_NAMES = frozenset(f.name for f in dataclasses.fields(LACParams))

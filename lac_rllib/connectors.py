@@ -1,0 +1,102 @@
+"""Getting the cost signal through RLlib: a learner connector for the per-step cost column,
+a connector that shuffles the train batch, and env-runner callbacks for episode costs.
+
+Every task reports a step's cost in ``info["cost"]`` (lac_rllib.tasks). RLlib carries infos in
+its episodes; the pieces here turn them into (a) a ``costs`` column aligned row by row with
+rewards and next observations, (b) the episode cost Ĵ_C per the task's convention (summed or
+discounted with γ_C), which drives ν (eq. 14) and the reported metrics.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from ray.rllib.callbacks.callbacks import RLlibCallback
+from ray.rllib.connectors.connector_v2 import ConnectorV2
+
+COSTS = "costs"
+# Keys in episode.custom_data (they survive episode chunking: cut() copies custom_data).
+EPISODE_COST, EPISODE_RETURN = "lac_episode_cost", "lac_episode_return"
+
+
+def step_cost(info: dict) -> float:
+    try:
+        return float(info["cost"])
+    except (KeyError, TypeError):
+        raise KeyError(
+            f"the env's step info has no 'cost' entry (got keys {sorted(info or {})}); "
+            "LAC tasks must report the per-step cost in info['cost']"
+        ) from None
+
+
+class AddCostsFromInfos(ConnectorV2):
+    """Adds the ``costs`` column: the cost of each transition (s, a, r, c, s').
+
+    It must sit right after ``AddNextObservationsFromEpisodesToTrainBatch`` in the learner
+    pipeline (see NOTES.md: placed earlier, rows come out misaligned). Infos index like
+    observations (index 0 is the reset info), so the cost of step t is ``infos[t + 1]``.
+    """
+
+    def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
+        if COSTS in batch:
+            return batch
+        for episode in self.single_agent_episode_iterator(episodes, agents_that_stepped_only=False):
+            infos = episode.get_infos(slice(1, len(episode) + 1))
+            self.add_n_batch_items(
+                batch, COSTS,
+                items_to_add=np.asarray([step_cost(i) for i in infos], dtype=np.float32),
+                num_items=len(episode), single_agent_episode=episode,
+            )
+        return batch
+
+
+class ShuffleRows(ConnectorV2):
+    """Permutes the rows of the batched train batch (one permutation for all columns).
+
+    Learner.update only shuffles between epochs; LAC makes exactly one pass over the buffer
+    per iteration (SPEC §5), so without this the minibatches would be consecutive steps.
+    """
+
+    def __init__(self, *args, seed: int | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._rng = np.random.default_rng(seed)
+
+    def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
+        for module_id, columns in batch.items():
+            if not isinstance(columns, dict):
+                continue
+            n = {len(v) for v in columns.values() if isinstance(v, np.ndarray)}
+            if len(n) != 1:
+                continue
+            perm = self._rng.permutation(n.pop())
+            batch[module_id] = {k: (v[perm] if isinstance(v, np.ndarray) else v) for k, v in columns.items()}
+        return batch
+
+
+class EpisodeCostCallback(RLlibCallback):
+    """Accumulates each episode's cost (and return) on the env runner, as the task counts it.
+
+    Ĵ_C = Σ_t γ_C^t c_t with γ_C = ``config.effective_episode_cost_discount`` (1 = a plain sum).
+    The totals ride along in ``episode.custom_data`` to the driver, which takes the episodes
+    completed in the latest batch for the ν update, and are logged as RLlib env-runner metrics.
+    """
+
+    def on_episode_start(self, *, episode, **kwargs) -> None:
+        episode.custom_data[EPISODE_COST] = 0.0
+        episode.custom_data[EPISODE_RETURN] = 0.0
+
+    def on_episode_step(self, *, episode, env_runner, **kwargs) -> None:
+        t = episode.t - 1  # global index of the step just taken
+        gamma_c = env_runner.config.effective_episode_cost_discount
+        episode.custom_data[EPISODE_COST] += gamma_c**t * step_cost(episode.get_infos(-1))
+        episode.custom_data[EPISODE_RETURN] += float(episode.get_rewards(-1))
+
+    def on_episode_end(self, *, episode, metrics_logger, **kwargs) -> None:
+        metrics_logger.log_value("episode_cost_mean", episode.custom_data[EPISODE_COST], window=100)
+
+
+def completed_episode_stats(episodes) -> tuple[list[float], list[float]]:
+    """(returns, costs) of the episodes that ended in ``episodes`` (chunks from one sample)."""
+    done = [e for e in episodes if e.is_done and EPISODE_COST in e.custom_data]
+    return ([e.custom_data[EPISODE_RETURN] for e in done], [e.custom_data[EPISODE_COST] for e in done])

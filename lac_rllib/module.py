@@ -1,0 +1,120 @@
+"""LACTorchRLModule: the networks of LAC and their forward passes (losses live in the Learner).
+
+- ``actor``: the Gaussian generator π_φ (SPEC §3). Inference acts with its mean, exploration
+  samples it (RLlib's TorchDiagGaussian over [mean, log_std]).
+- ``critics``: 2 reward + 2 cost critics as one batched ensemble (SPEC §2).
+- ``target_actor`` / ``target_critics``: Polyak copies π_φ', Q' (Algorithm 2, lines 11-13).
+- ``nu``: the Lagrange multiplier ν (eq. 14). It is a buffer of the module, so it travels with
+  the weights (the Learner's state, checkpoints) and a restored module can run the chain at
+  deployment. The Learner is the only writer.
+
+Only the actor (and ν) exist on env runners: critics and targets are non-inference attributes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from ray.rllib.core.columns import Columns
+from ray.rllib.core.learner.utils import make_target_network
+from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
+from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
+
+from lac_rllib.langevin import ChainResult, langevin_chain
+from lac_rllib.networks import CriticEnsemble, GaussianActor
+
+# Keys of the forward_train output, declared once.
+Q_PRED = "q_pred"  # (E, B) online Q(s, a), rows [:n_reward] reward critics
+Q_TARGET_NEXT = "q_target_next"  # (E, B) target Q'(s', ã')
+ACTOR_MEAN, ACTOR_LOG_STD = "actor_mean", "actor_log_std"  # π_φ(·|s*)
+TARGET_MEAN, TARGET_LOG_STD = "target_mean", "target_log_std"  # π_φ'(·|s*)
+ACTOR_TARGET_ACTION = "actor_target_action"  # ã, the maximum-likelihood target of eq. (15)
+CHAIN = "chain"  # ChainResult of the critic-target chain
+
+
+class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
+    framework = "torch"
+
+    def setup(self):
+        cfg = self.model_config
+        obs_dim = int(self.observation_space.shape[0])
+        act_dim = int(self.action_space.shape[0])
+        self.actor = GaussianActor(
+            obs_dim, act_dim, hidden=tuple(cfg["actor_hidden"]),
+            activation=cfg["actor_activation"], log_std_init=cfg["log_std_init"],
+        )
+        self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
+        if not self.inference_only:
+            self.critics = CriticEnsemble(obs_dim, act_dim, hidden=tuple(cfg["critic_hidden"]))
+        self._low = torch.tensor(np.array(self.action_space.low), dtype=torch.float32)
+        self._high = torch.tensor(np.array(self.action_space.high), dtype=torch.float32)
+
+    # ----- acting (env runners) -----
+    def _forward_inference(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
+        mean, log_std = self.actor(batch[Columns.OBS])
+        return {Columns.ACTION_DIST_INPUTS: torch.cat([mean, log_std], dim=-1)}
+
+    def _forward_exploration(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
+        return self._forward_inference(batch)
+
+    # ----- training (learner) -----
+    def _forward_train(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
+        obs, next_obs = batch[Columns.OBS], batch[Columns.NEXT_OBS]
+        with torch.no_grad():
+            t_mean_next, t_log_std_next = self.target_actor(next_obs)
+            # ã' = Langevin chain at s' started from π_φ'(·|s') (Algorithm 2, line 7).
+            chain = self.langevin(next_obs, t_mean_next, t_log_std_next)
+            q_target_next = self.target_critics(next_obs, chain.action)  # eq. (13)
+        out = {
+            Q_PRED: self.critics(obs, batch[Columns.ACTIONS]),
+            Q_TARGET_NEXT: q_target_next,
+            CHAIN: chain,
+        }
+        if self.model_config["actor_chain_at"] == "next":
+            # One chain per minibatch: the actor fits the critic's target action at s' [C].
+            s_star, target_action, t_mean, t_log_std = next_obs, chain.action, t_mean_next, t_log_std_next
+        else:
+            # eq. (15) as written: a second chain at s.
+            s_star = obs
+            with torch.no_grad():
+                t_mean, t_log_std = self.target_actor(obs)
+                target_action = self.langevin(obs, t_mean, t_log_std).action
+        out[ACTOR_MEAN], out[ACTOR_LOG_STD] = self.actor(s_star)
+        out[TARGET_MEAN], out[TARGET_LOG_STD] = t_mean, t_log_std
+        out[ACTOR_TARGET_ACTION] = target_action
+        return out
+
+    def langevin(self, obs, mean, log_std, *, steps=None, step_size=None, generator=None) -> ChainResult:
+        """Algorithm 1 at ``obs`` with the online critics, ν and this module's settings.
+
+        ``mean``/``log_std`` are π_φ'(·|obs); ``steps``/``step_size`` override T and η.
+        """
+        cfg = self.model_config
+        clamp = cfg["langevin_clamp"]
+        return langevin_chain(
+            self.critics, obs, mean, log_std,
+            steps=steps or cfg["langevin_steps"],
+            step_size=step_size or cfg["langevin_step_size"],
+            temperature=cfg["temperature"], nu=self.nu, logp_weight=cfg["logp_weight"],
+            start=cfg["langevin_start"],
+            low=self._low if clamp else None, high=self._high if clamp else None,
+            grad_clip=cfg["langevin_grad_clip"], generator=generator,
+        )
+
+    # ----- RLlib APIs -----
+    def make_target_networks(self) -> None:
+        self.target_actor = make_target_network(self.actor)
+        self.target_critics = make_target_network(self.critics)
+
+    def get_target_network_pairs(self):
+        return [(self.actor, self.target_actor), (self.critics, self.target_critics)]
+
+    def forward_target(self, batch: dict[str, Any]) -> dict[str, Any]:
+        return {"q": self.target_critics(batch[Columns.OBS], batch[Columns.ACTIONS])}
+
+    def get_non_inference_attributes(self) -> list[str]:
+        return ["critics", "target_critics", "target_actor"]
+
+

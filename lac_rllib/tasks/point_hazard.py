@@ -1,0 +1,110 @@
+"""``lac/PointHazard-v0``: a tiny safe task in pure numpy (tests and the smallest budgets).
+
+A point in the plane starts near (-1, 0) and must reach the goal at (1, 0). A round hazard of
+radius 0.5 sits at the origin, right on the straight path: each step inside it costs 1.
+Reward per step = progress towards the goal − 0.1 (so time matters), +1 on reaching the goal.
+
+Why it is a fair constrained test: the straight path takes ~20 steps and ~10 of them are in
+the hazard (episode cost ≈ 10 > the limit 2), so an unconstrained agent violates the limit;
+the detour around the disc is ~23 steps with cost 0 and only a slightly lower return. A random
+policy neither reaches the goal nor gets near the hazard (return ≈ −10).
+
+Also ``lac/CostProbe-v0``: a diagnostic task whose cost is a known function of the step
+(cost = 2·t + 1 at step t, the observation carries t), to check cost/row alignment.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+
+from lac_rllib.tasks.registry import TINY, TaskSpec, register
+
+GOAL = (1.0, 0.0)
+HAZARD_RADIUS = 0.5
+GOAL_RADIUS = 0.1
+MAX_SPEED = 0.1
+STEP_PENALTY = 0.1
+GOAL_BONUS = 1.0
+
+
+class PointHazardEnv(gym.Env):
+    metadata = {"render_modes": []}
+
+    def __init__(self, max_steps: int = 100):
+        self.max_steps = int(max_steps)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(7,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self._x = self._y = 0.0
+        self._t = 0
+
+    def _obs(self) -> np.ndarray:
+        x, y = self._x, self._y
+        return np.array(
+            [x, y, GOAL[0] - x, GOAL[1] - y, -x, -y, math.hypot(x, y) - HAZARD_RADIUS],
+            dtype=np.float32,
+        )
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._x = -1.0 + float(self.np_random.uniform(-0.05, 0.05))
+        self._y = float(self.np_random.uniform(-0.1, 0.1))
+        self._t = 0
+        return self._obs(), {"cost": 0.0}
+
+    def step(self, action):
+        ax = min(max(float(action[0]), -1.0), 1.0)
+        ay = min(max(float(action[1]), -1.0), 1.0)
+        d_before = math.hypot(GOAL[0] - self._x, GOAL[1] - self._y)
+        self._x += MAX_SPEED * ax
+        self._y += MAX_SPEED * ay
+        self._t += 1
+        d_after = math.hypot(GOAL[0] - self._x, GOAL[1] - self._y)
+        reached = d_after < GOAL_RADIUS
+        reward = (d_before - d_after) - STEP_PENALTY + (GOAL_BONUS if reached else 0.0)
+        cost = 1.0 if math.hypot(self._x, self._y) < HAZARD_RADIUS else 0.0
+        truncated = (not reached) and self._t >= self.max_steps
+        return self._obs(), reward, reached, truncated, {"cost": cost}
+
+
+class CostProbeEnv(gym.Env):
+    """Cost of step t is 2t + 1, reward is −t; obs = [t]; episodes of ``length`` steps."""
+
+    def __init__(self, length: int = 7):
+        self.length = int(length)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self._t = 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._t = 0
+        return np.array([0.0], np.float32), {"cost": 0.0}
+
+    def step(self, action):
+        t = self._t
+        self._t += 1
+        obs = np.array([float(self._t)], np.float32)
+        return obs, -float(t), self._t >= self.length, False, {"cost": 2.0 * t + 1.0}
+
+
+def make_point_hazard(env_config: dict) -> gym.Env:
+    return PointHazardEnv(**{k: v for k, v in env_config.items() if k in ("max_steps",)})
+
+
+def make_cost_probe(env_config: dict) -> gym.Env:
+    return CostProbeEnv(**{k: v for k, v in env_config.items() if k in ("length",)})
+
+
+POINT_HAZARD = register(TaskSpec(
+    id="lac/PointHazard-v0", factory=f"{__name__}:make_point_hazard", cost_limit=2.0,
+    episode_cost_discount=1.0, preset=TINY, obs_dim=7, act_dim=2,
+    cost_source='info["cost"] = 1 inside the hazard disc',
+))
+COST_PROBE = register(TaskSpec(
+    id="lac/CostProbe-v0", factory=f"{__name__}:make_cost_probe", cost_limit=1e9,
+    episode_cost_discount=1.0, preset=TINY, obs_dim=1, act_dim=1,
+    cost_source='info["cost"] = 2t + 1 (diagnostic)',
+))

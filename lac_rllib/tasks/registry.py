@@ -1,0 +1,90 @@
+"""The task registry: every safe task lac-rllib trains on, declared once.
+
+A task bundles what LAC needs to know beyond the gymnasium id: where the per-step cost
+comes from, how episode costs are aggregated for the Lagrange update (eq. 14), the cost
+limit b, the LAC preset (SPEC Table 4 or 5) and the observation/action sizes.
+
+Every env we build returns the cost of a step in ``info["cost"]`` (wrappers make it so),
+because that is the one place RLlib's env runners carry per-step side data into episodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from typing import Any, Callable
+
+import gymnasium as gym
+
+#: Preset names understood by ``LACConfig.preset`` (SPEC §5 columns).
+MUJOCO, SAFETY_GYM, TINY = "mujoco", "safety_gym", "tiny"
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """Everything lac-rllib knows about one safe task."""
+
+    #: Gymnasium id (with namespace), e.g. ``"lac/PointHazard-v0"``.
+    id: str
+    #: ``"module:function"`` building the env from an env-config dict. A string (not a
+    #: callable) so remote env runners import it themselves: that import is what pulls
+    #: in compatibility patches in every process.
+    factory: str
+    #: Cost limit b on the episode cost.
+    cost_limit: float
+    #: Discount γ_C used to aggregate the per-step cost into the episode cost Ĵ_C for
+    #: the ν update and the reported ``episode_cost``: 1.0 means a plain sum (Safety-Gym
+    #: convention), 0.99 the FOCOPS discounted convention.
+    episode_cost_discount: float
+    #: Which LAC preset applies (``"mujoco"``, ``"safety_gym"`` or ``"tiny"``).
+    preset: str
+    #: Observation and action sizes (flat Box spaces).
+    obs_dim: int
+    act_dim: int
+    #: Human-readable source of the per-step cost, for docs and run metadata.
+    cost_source: str = 'info["cost"]'
+    #: Keyword arguments passed to the factory by default.
+    kwargs: dict = dataclasses.field(default_factory=dict)
+
+    def make(self, env_config: dict | None = None) -> gym.Env:
+        """Build one env instance (works in any process)."""
+        module, func = self.factory.split(":")
+        fn: Callable[..., gym.Env] = getattr(importlib.import_module(module), func)
+        cfg = {**self.kwargs, **(dict(env_config) if env_config else {})}
+        return fn(cfg)
+
+
+_TASKS: dict[str, TaskSpec] = {}
+
+
+def register(spec: TaskSpec) -> TaskSpec:
+    """Add ``spec`` to the registry and to gymnasium's (so ``gym.make(id)`` works too)."""
+    _TASKS[spec.id] = spec
+    if spec.id not in gym.registry:
+        gym.register(id=spec.id, entry_point=_gym_entry_point, kwargs={"task_id": spec.id})
+    return spec
+
+
+def _gym_entry_point(task_id: str, **env_config: Any) -> gym.Env:
+    return get_task(task_id).make(env_config)
+
+
+def known_tasks() -> list[str]:
+    _load_builtin()
+    return sorted(_TASKS)
+
+
+def get_task(task_id: str) -> TaskSpec:
+    """Look a task up; an unknown id raises ``ValueError`` listing the known ones."""
+    _load_builtin()
+    try:
+        return _TASKS[task_id]
+    except KeyError:
+        raise ValueError(
+            f"unknown task {task_id!r}; known tasks: {', '.join(sorted(_TASKS))}"
+        ) from None
+
+
+def _load_builtin() -> None:
+    # Importing the package registers the built-in tasks (cheap: no MuJoCo import).
+    importlib.import_module("lac_rllib.tasks")

@@ -1,0 +1,24 @@
+"""One Ray start for the whole session (ray.init costs ~10 s and ~1.5 GiB here)."""
+
+import os
+
+import pytest
+
+os.environ.setdefault("RAY_DEDUP_LOGS", "0")
+
+
+@pytest.fixture(scope="session")
+def ray_session():
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    yield ray
+    ray.shutdown()
+
+
+def tiny_config(task="lac/PointHazard-v0", seed=0, **overrides):
+    """A LACConfig on a built-in task, sized for tests."""
+    from lac_rllib.config import LACConfig
+
+    return LACConfig().task(task).training(**overrides).debugging(seed=seed)
