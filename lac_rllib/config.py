@@ -98,6 +98,10 @@ class LACParams:
     """Running mean/std observation filter [C]; its state is checkpointed."""
     obs_clip: float = 5.0
     """Clip of the normalised observation [C]."""
+    torch_threads: int = 1
+    """Intra-op torch threads of the learner process [D]: minibatch tensors are small, and on a
+    shared 2-core machine 2 threads made one critic-gradient op ~250x slower than 1 (measured).
+    A sweep sets it to the CPUs of a trial."""
 
     # --- task ---
     cost_limit: float | None = None
@@ -120,7 +124,10 @@ def field_docs() -> dict[str, str]:
             docs[node.target.id] = " ".join(str(nxt.value.value).split())
     return docs
 
-# Table 4 (MuJoCo) and Table 5 (Safety Gym); "tiny" sizes the built-in test task for minutes.
+# Table 4 (MuJoCo) and Table 5 (Safety Gym). "tiny" [D] sizes lac/PointHazard-v0 to learn in
+# about a minute on 2 cores: small nets, short chains, and α_ν = 0.03 because its cost limit (2)
+# is ten times smaller than Safety Gym's (25); with 0.01 ν took ~40k steps to matter, with 0.1 it
+# overshot and the agent froze (measured on seeds 0 and 1).
 PRESETS: dict[str, dict[str, Any]] = {
     "mujoco": {"env_steps_per_iteration": 5000},
     "safety_gym": {"env_steps_per_iteration": 20_000},
@@ -131,7 +138,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "actor_hidden": (64, 64),
         "critic_hidden": (64, 64),
         "random_iterations": 2,
-        "gradient_passes": 0.5,
+        "nu_lr": 0.03,
     },
 }
 
@@ -148,7 +155,8 @@ def check_field(name: str, value: Any) -> None:
     positive = {"langevin_step_size", "temperature", "critic_lr", "actor_lr", "obs_clip",
                 "gradient_passes"}
     non_negative = {"logp_weight", "beta", "nu_init", "nu_lr", "reward_scale"}
-    pos_int = {"langevin_steps", "env_steps_per_iteration", "replay_capacity", "lac_minibatch_size"}
+    pos_int = {"langevin_steps", "env_steps_per_iteration", "replay_capacity", "lac_minibatch_size",
+               "torch_threads"}
     if name in pos_int and not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
         bad("an integer >= 1")
     if name in positive and not (real(value) and value > 0):
@@ -226,7 +234,7 @@ class LACConfig(AlgorithmConfig):
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(PRESETS)}")
         self.task_id, self.preset_name = task_id, name
-        self.training(**PRESETS[name], **getattr(spec, "overrides", {}))
+        self.training(**{**PRESETS[name], **spec.overrides})
         from lac_rllib.algorithm import register_task_env
 
         register_task_env(task_id)

@@ -42,6 +42,7 @@ def critic_targets(batch, q_next: torch.Tensor, n_reward: int, config) -> tuple[
 
 class LACTorchLearner(TorchLearner):
     def build(self) -> None:
+        torch.set_num_threads(self.config.torch_threads)
         super().build()
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None

@@ -1,13 +1,15 @@
 """``lac/PointHazard-v0``: a tiny safe task in pure numpy (tests and the smallest budgets).
 
-A point in the plane starts near (-1, 0) and must reach the goal at (1, 0). A round hazard of
-radius 0.5 sits at the origin, right on the straight path: each step inside it costs 1.
-Reward per step = progress towards the goal − 0.1 (so time matters), +1 on reaching the goal.
+A point in the plane starts near (-1, 0) and must reach the goal at (1, 0) within 100 steps of
+at most 0.1. A round hazard of radius 0.35 sits at the origin, right on the straight path: each
+step inside it costs 1. Reward per step = progress towards the goal − 0.1 (so time matters), +1 on
+reaching the goal.
 
-Why it is a fair constrained test: the straight path takes ~20 steps and ~10 of them are in
-the hazard (episode cost ≈ 10 > the limit 2), so an unconstrained agent violates the limit;
-the detour around the disc is ~23 steps with cost 0 and only a slightly lower return. A random
-policy neither reaches the goal nor gets near the hazard (return ≈ −10).
+Why it is a fair constrained test: the straight path takes ~20 steps and ~7 of them are in the
+hazard (episode cost ≈ 7 > the limit 2), so an unconstrained agent violates the limit (LAC with
+ν pinned at 0 ends at cost ≈ 11, return ≈ 0.7); the detour around the disc costs 0 and a few
+steps (LAC with ν ends at cost 0, return ≈ 0.3). A random policy does not reach the goal
+(return ≈ −10) and drifts into the hazard now and then.
 
 Also ``lac/CostProbe-v0``: a diagnostic task whose cost is a known function of the step
 (cost = 2·t + 1 at step t, the observation carries t), to check cost/row alignment.
@@ -23,7 +25,7 @@ import numpy as np
 from lac_rllib.tasks.registry import TINY, TaskSpec, register
 
 GOAL = (1.0, 0.0)
-HAZARD_RADIUS = 0.5
+HAZARD_RADIUS = 0.35
 GOAL_RADIUS = 0.1
 MAX_SPEED = 0.1
 STEP_PENALTY = 0.1
@@ -33,8 +35,9 @@ GOAL_BONUS = 1.0
 class PointHazardEnv(gym.Env):
     metadata = {"render_modes": []}
 
-    def __init__(self, max_steps: int = 100):
+    def __init__(self, max_steps: int = 100, hazard_radius: float = HAZARD_RADIUS):
         self.max_steps = int(max_steps)
+        self.hazard_radius = float(hazard_radius)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(7,), dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self._x = self._y = 0.0
@@ -43,7 +46,7 @@ class PointHazardEnv(gym.Env):
     def _obs(self) -> np.ndarray:
         x, y = self._x, self._y
         return np.array(
-            [x, y, GOAL[0] - x, GOAL[1] - y, -x, -y, math.hypot(x, y) - HAZARD_RADIUS],
+            [x, y, GOAL[0] - x, GOAL[1] - y, -x, -y, math.hypot(x, y) - self.hazard_radius],
             dtype=np.float32,
         )
 
@@ -64,7 +67,7 @@ class PointHazardEnv(gym.Env):
         d_after = math.hypot(GOAL[0] - self._x, GOAL[1] - self._y)
         reached = d_after < GOAL_RADIUS
         reward = (d_before - d_after) - STEP_PENALTY + (GOAL_BONUS if reached else 0.0)
-        cost = 1.0 if math.hypot(self._x, self._y) < HAZARD_RADIUS else 0.0
+        cost = 1.0 if math.hypot(self._x, self._y) < self.hazard_radius else 0.0
         truncated = (not reached) and self._t >= self.max_steps
         return self._obs(), reward, reached, truncated, {"cost": cost}
 
@@ -91,7 +94,7 @@ class CostProbeEnv(gym.Env):
 
 
 def make_point_hazard(env_config: dict) -> gym.Env:
-    return PointHazardEnv(**{k: v for k, v in env_config.items() if k in ("max_steps",)})
+    return PointHazardEnv(**{k: v for k, v in env_config.items() if k in ("max_steps", "hazard_radius")})
 
 
 def make_cost_probe(env_config: dict) -> gym.Env:

@@ -45,6 +45,8 @@ class TaskSpec:
     cost_source: str = 'info["cost"]'
     #: Keyword arguments passed to the factory by default.
     kwargs: dict = dataclasses.field(default_factory=dict)
+    #: LAC fields this task sets on top of its preset (e.g. T = 50 on the Button tasks).
+    overrides: dict = dataclasses.field(default_factory=dict)
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""

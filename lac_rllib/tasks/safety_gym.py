@@ -103,7 +103,7 @@ def make_env(env_config: dict | None = None) -> gym.Env:
         return SafetyToGymnasium(inner)
 
 
-def _nav(env_id: str, obs_dim: int, hazards: str) -> TaskSpec:
+def _nav(env_id: str, obs_dim: int, hazards: str, overrides: dict | None = None) -> TaskSpec:
     return TaskSpec(
         id=env_id,
         factory=FACTORY,
@@ -114,6 +114,7 @@ def _nav(env_id: str, obs_dim: int, hazards: str) -> TaskSpec:
         act_dim=2,
         cost_source=f'safety_gymnasium info["cost"] in {{0,1}} ({hazards}), summed',
         kwargs={"env_id": env_id},
+        overrides=overrides or {},
     )
 
 
@@ -134,8 +135,9 @@ def _vel(env_id: str, obs_dim: int, act_dim: int, indicator: str) -> TaskSpec:
 TASKS: tuple[TaskSpec, ...] = (
     _nav("SafetyPointGoal1-v0", 60, "hazards"),
     _nav("SafetyCarGoal1-v0", 72, "hazards"),
-    _nav("SafetyPointButton1-v0", 76, "hazards, gremlins, wrong buttons"),
-    _nav("SafetyCarButton1-v0", 88, "hazards, gremlins, wrong buttons"),
+    # Table 5: the Button tasks run T = 50 Langevin steps.
+    _nav("SafetyPointButton1-v0", 76, "hazards, gremlins, wrong buttons", {"langevin_steps": 50}),
+    _nav("SafetyCarButton1-v0", 88, "hazards, gremlins, wrong buttons", {"langevin_steps": 50}),
     _vel("SafetyAntVelocity-v1", 27, 8, "1[sqrt(vx^2+vy^2) > 2.6222]"),
     _vel("SafetySwimmerVelocity-v1", 8, 2, "1[vx > 0.2282]"),
     _vel("SafetyHumanoidVelocity-v1", 376, 17, "1[sqrt(vx^2+vy^2) > 1.4149]"),

@@ -1,0 +1,74 @@
+"""LACConfig: SPEC defaults, presets, and clear early errors for bad values."""
+
+import subprocess
+import sys
+
+import pytest
+
+from lac_rllib.config import FIELD_NAMES, LACConfig, LACParams, field_docs
+
+
+@pytest.mark.parametrize("field,value,accepted", [
+    ("langevin_steps", 0, "integer >= 1"),
+    ("langevin_steps", 2.5, "integer >= 1"),
+    ("langevin_step_size", 0.0, "> 0"),
+    ("langevin_step_size", -1e-4, "> 0"),
+    ("temperature", 0, "> 0"),
+    ("temperature", -1.0, "> 0"),
+    ("beta", -0.1, ">= 0"),
+    ("langevin_start", "uniform", "informative | noninformative"),
+    ("actor_chain_at", "previous", "next | current"),
+    ("cost_gamma", 1.5, "(0, 1]"),
+    ("nu_lr", float("nan"), ">= 0"),
+])
+def test_bad_values_name_field_and_accepted_range(field, value, accepted):
+    with pytest.raises(ValueError) as err:
+        LACConfig().training(**{field: value})
+    assert field in str(err.value) and accepted in str(err.value) and repr(value) in str(err.value)
+
+
+def test_unknown_task_lists_known_ones():
+    with pytest.raises(ValueError, match="unknown task 'Nope-v0'; known tasks: .*lac/PointHazard-v0"):
+        LACConfig().task("Nope-v0")
+
+
+def test_spec_defaults_and_presets():
+    c = LACConfig()
+    assert (c.langevin_steps, c.langevin_step_size, c.temperature, c.beta) == (30, 1e-4, 1e-3, 0.0)
+    assert (c.nu_lr, c.nu_init, c.polyak_tau, c.reward_scale, c.cost_gamma, c.gamma) == (0.01, 0.0, 0.005, 10.0, 0.99, 0.99)
+    assert (c.replay_capacity, c.lac_minibatch_size, c.random_iterations) == (50_000, 256, 5)
+    assert LACConfig().task("SafetyPointGoal1-v0").env_steps_per_iteration == 20_000  # Table 5
+    assert LACConfig().task("focops/AntVelocity-v0").env_steps_per_iteration == 5_000  # Table 4
+    assert LACConfig().task("SafetyPointButton1-v0").langevin_steps == 50  # Table 5, Button
+    # explicit values win over the preset
+    assert LACConfig().task("SafetyPointGoal1-v0").training(env_steps_per_iteration=7).env_steps_per_iteration == 7
+
+
+def test_every_field_has_a_docstring():
+    docs = field_docs()
+    assert set(docs) == FIELD_NAMES == {f for f in LACParams.__dataclass_fields__}
+    assert all(len(d) > 10 for d in docs.values())
+
+
+def test_task_convention_feeds_cost_limit_and_discount():
+    c = LACConfig().task("focops/SwimmerVelocity-v0")
+    assert c.effective_cost_limit == pytest.approx(24.516) and c.effective_episode_cost_discount == 0.99
+    c = LACConfig().task("SafetyCarGoal1-v0").training(cost_limit=10.0)
+    assert c.effective_cost_limit == 10.0 and c.effective_episode_cost_discount == 1.0
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--set", "langevin_steps=0"], "langevin_steps=0 is invalid; accepted: an integer >= 1"),
+    (["--set", "langevin_step_size=0"], "langevin_step_size=0 is invalid"),
+    (["--set", "temperature=-1"], "temperature=-1 is invalid"),
+    (["--set", "beta=-1"], "beta=-1 is invalid"),
+    (["--set", "nosuch=1"], "unknown LAC config field 'nosuch'; accepted:"),
+    (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
+    (["--timesteps", "0"], "--timesteps 0 is invalid"),
+])
+def test_cli_rejects_bad_input_before_ray_starts(tmp_path, args, needle):
+    argv = [sys.executable, "-m", "lac_rllib.train", "--timesteps", "10", "--output", str(tmp_path), *args]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert needle in proc.stderr
+    assert "Started a local Ray instance" not in proc.stderr + proc.stdout
