@@ -1,0 +1,295 @@
+"""Reports for a finished LAC sweep, attached by the caller to the sweep's MLflow parent run.
+
+Turns the per-trial table and per-iteration curves into a per-configuration summary (CSV,
+markdown, best feasible configuration as JSON) and the plots of the paper's ablations
+(SPEC §7: box plots of the final cost per swept value, Figs. 4/6/7; mean learning curves).
+
+Conventions:
+- A configuration is (group, param, value, task); its rows are its seeds.
+- A trial *failed* if its status is "ERROR" or its final episode_return / episode_cost is NaN.
+  Failed trials count in ``n_failed`` and are left out of every statistic and plot.
+- Spreads are the sample std over seeds (ddof=1); with one finished seed it is NaN and the
+  markdown shows "14.20 ± –". Curve bands use the same std and are omitted for a single seed.
+- Plots get one panel (row, for curves) per group, split per task if a group spans several.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+KEYS = ["group", "param", "value", "task"]
+STATS = ["n_seeds", "n_failed", "return_mean", "return_std", "cost_mean", "cost_std",
+         "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean"]
+
+
+def _is_na(v) -> bool:
+    return v is None or (pd.api.types.is_scalar(v) and bool(pd.isna(v)))
+
+
+def _value_key(v) -> tuple:
+    """Sort key: numeric values first (numerically), then strings, then missing."""
+    if _is_na(v):
+        return (2, 0.0, "")
+    try:
+        return (0, float(v), "")
+    except (TypeError, ValueError):
+        return (1, 0.0, str(v))
+
+
+def _fmt_value(v) -> str:
+    """Display form of a swept value: 30.0 -> "30", missing -> "–"."""
+    if _is_na(v):
+        return "–"
+    return str(int(v)) if isinstance(v, (float, np.floating)) and float(v).is_integer() else str(v)
+
+
+def _fmt_num(x) -> str:
+    return "–" if _is_na(x) else f"{float(x):.2f}"
+
+
+def _pm(mean, std) -> str:
+    """Mean ± std; the std shows "–" when undefined (one seed), all "–" without finished seeds."""
+    return "–" if _is_na(mean) else f"{_fmt_num(mean)} ± {_fmt_num(std)}"
+
+
+def _prepared(trials: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
+    """Copy of ``trials`` with a clean ``param`` column, and the boolean mask of failed trials."""
+    df = trials.copy()
+    df["param"] = df["param"].fillna("").astype(str)
+    failed = df["status"].astype(str).eq("ERROR")
+    for col in ("episode_return", "episode_cost"):
+        failed |= pd.to_numeric(df[col], errors="coerce").isna()
+    return df, failed
+
+
+def summarize(trials: pd.DataFrame) -> pd.DataFrame:
+    """One row per (group, param, value, task) with seed statistics; see the module conventions."""
+    df, failed = _prepared(trials)
+    rows = []
+    for key, g in df.groupby(KEYS, dropna=False, sort=False):
+        ok = g[~failed.loc[g.index]]
+        ret, cost = (pd.to_numeric(ok[c], errors="coerce") for c in ("episode_return", "episode_cost"))
+        limit = pd.to_numeric(g["cost_limit"], errors="coerce").median()
+        rows.append(dict(
+            zip(KEYS, key), n_seeds=len(ok), n_failed=len(g) - len(ok),
+            return_mean=ret.mean(), return_std=ret.std(ddof=1),
+            cost_mean=cost.mean(), cost_std=cost.std(ddof=1), cost_limit=limit,
+            feasible_fraction=pd.to_numeric(ok["feasible"], errors="coerce").mean(),
+            mean_feasible=bool(cost.mean() <= limit),  # False when either side is NaN
+            objective_mean=pd.to_numeric(ok["objective"], errors="coerce").mean()))
+    rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"]))
+    return pd.DataFrame(rows, columns=KEYS + STATS)
+
+
+def best_configuration(summary: pd.DataFrame) -> dict | None:
+    """The mean-feasible configuration with the highest return_mean (JSON-ready dict), or None."""
+    ok = summary[summary["mean_feasible"].astype(bool) & summary["return_mean"].notna()]
+    if ok.empty:
+        return None
+    row = ok.loc[ok["return_mean"].idxmax()]
+    plain = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in row.items()}
+    return {k: (None if _is_na(v) else v) for k, v in plain.items()}
+
+
+def _describe(cfg: dict) -> str:
+    what = f"{cfg['group']} {cfg['param']}={_fmt_value(cfg['value'])}" if cfg["param"] else cfg["group"]
+    return (f"{what} on {cfg['task']}: return {_pm(cfg['return_mean'], cfg['return_std'])}, cost "
+            f"{_pm(cfg['cost_mean'], cfg['cost_std'])} (limit {_fmt_num(cfg['cost_limit'])}), "
+            f"{cfg['n_seeds']} seeds")
+
+
+def markdown_table(summary: pd.DataFrame) -> str:
+    """Markdown table of the summary (one row per configuration) plus a best-configuration line."""
+    def cell(x) -> str:
+        return str(x).replace("|", "\\|")
+
+    lines = ["| group | swept | value | task | seeds | return (mean ± std) | cost (mean ± std) "
+             "| limit | feasible |", "|---|---|---|---|---:|---:|---:|---:|---|"]
+    for r in summary.to_dict("records"):
+        seeds = f"{r['n_seeds']}" + (f" (+{r['n_failed']} failed)" if r["n_failed"] else "")
+        n_ok = "–" if _is_na(r["feasible_fraction"]) else round(r["feasible_fraction"] * r["n_seeds"])
+        feas = f"{'yes' if r['mean_feasible'] else 'no'} ({n_ok}/{r['n_seeds']} seeds)"
+        cols = [r["group"], r["param"] or "–", _fmt_value(r["value"]), r["task"], seeds,
+                _pm(r["return_mean"], r["return_std"]), _pm(r["cost_mean"], r["cost_std"]),
+                _fmt_num(r["cost_limit"]), feas if r["n_seeds"] else "no (all failed)"]
+        lines.append("| " + " | ".join(cell(c) for c in cols) + " |")
+    best = best_configuration(summary)
+    lines.append("")
+    lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
+                 "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)")
+    return "\n".join(lines) + "\n"
+
+
+def _panels(trials: pd.DataFrame, swept_only: bool) -> list[tuple[str, str, pd.DataFrame]]:
+    """(label, param, finished trials) per group, split per task when a group spans several."""
+    df, failed = _prepared(trials)
+    df = df[~failed]
+    out = []
+    for group in sorted(df["group"].astype(str).unique()):
+        g = df[df["group"].astype(str) == group]
+        param = next((p for p in g["param"] if p), "")
+        if swept_only and not param:
+            continue
+        tasks = sorted(g["task"].astype(str).unique())
+        for task in tasks:
+            out.append((group if len(tasks) == 1 else f"{group} ({task})", param,
+                        g[g["task"].astype(str) == task]))
+    return out
+
+
+def _values(sub: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
+    """(value label, rows) for each distinct swept value of ``sub``, in sorted order."""
+    labels = sub["value"].map(_fmt_value)
+    firsts = {lab: v for lab, v in zip(labels[::-1], sub["value"][::-1])}
+    return [(lab, sub[labels == lab]) for lab in sorted(firsts, key=lambda k: _value_key(firsts[k]))]
+
+
+def _limit(*series: pd.Series) -> float:
+    """Median of the first series that has a numeric value (NaN if none)."""
+    for s in series:
+        v = pd.to_numeric(s, errors="coerce").median()
+        if not _is_na(v):
+            return float(v)
+    return math.nan
+
+
+def _save(fig, path) -> str:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)
+
+
+def cost_box_plots(trials: pd.DataFrame, path) -> str | None:
+    """Box plots of the final episode cost per swept value, one subplot per swept group."""
+    panels = _panels(trials, swept_only=True)
+    if not panels:
+        return None
+    ncols = min(3, len(panels))
+    nrows = math.ceil(len(panels) / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4 * nrows), squeeze=False)
+    rng = np.random.default_rng(0)  # jitter of the seed dots only
+    for ax, (label, param, sub) in zip(axes.ravel(), panels):
+        vals = _values(sub)
+        data = [pd.to_numeric(rows["episode_cost"]).to_numpy(float) for _, rows in vals]
+        pos = np.arange(1, len(vals) + 1)
+        ax.boxplot(data, positions=pos, widths=0.5)
+        for p, d in zip(pos, data):
+            ax.plot(p + rng.uniform(-0.12, 0.12, len(d)), d, "o", ms=4, alpha=0.6, color="tab:blue")
+        ax.set_xticks(pos, [lab for lab, _ in vals])
+        limit = _limit(sub["cost_limit"])
+        if not math.isnan(limit):
+            ax.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
+            ax.legend(loc="best", fontsize=8)
+            ys = np.concatenate(data + [np.array([limit])])
+            pad = 0.08 * (ys.max() - ys.min() or 1.0)  # keep the limit line off the frame edge
+            ax.set_ylim(ys.min() - pad, ys.max() + pad)
+        ax.set(title=f"{label}: final cost per {param}", xlabel=param, ylabel="final episode cost")
+    for ax in axes.ravel()[len(panels):]:
+        ax.set_visible(False)
+    return _save(fig, path)
+
+
+def _xy(frame: pd.DataFrame, col: str) -> tuple[np.ndarray, np.ndarray]:
+    """(env_steps, col) of a curve, numeric, NaN-free, sorted by env_steps."""
+    if frame is None or "env_steps" not in frame or col not in frame:
+        return np.empty(0), np.empty(0)
+    d = frame[["env_steps", col]].apply(pd.to_numeric, errors="coerce").dropna()
+    d = d.sort_values("env_steps")
+    return d["env_steps"].to_numpy(float), d[col].to_numpy(float)
+
+
+def _mean_curve(frames: list[pd.DataFrame], col: str, n: int = 200):
+    """(grid, mean, std) of ``col`` over seeds interpolated on a common env_steps grid, or None.
+
+    The grid spans the range all seeds cover (the union if they do not overlap); std is ddof=1,
+    NaN where fewer than two seeds are present.
+    """
+    series = [s for s in (_xy(f, col) for f in frames) if s[0].size]
+    if not series:
+        return None
+    lo, hi = max(x[0] for x, _ in series), min(x[-1] for x, _ in series)
+    if hi < lo:
+        lo, hi = min(x[0] for x, _ in series), max(x[-1] for x, _ in series)
+    grid = np.linspace(lo, hi, n) if hi > lo else np.array([lo])
+    ys = np.array([np.where((grid >= x[0]) & (grid <= x[-1]), np.interp(grid, x, y), np.nan)
+                   for x, y in series])
+    cnt = (~np.isnan(ys)).sum(0)
+    mean = np.where(cnt > 0, np.nansum(ys, 0) / np.maximum(cnt, 1), np.nan)
+    var = np.nansum((ys - mean) ** 2, 0) / np.maximum(cnt - 1, 1)
+    return grid, mean, np.where(cnt > 1, np.sqrt(var), np.nan)
+
+
+def learning_curves(trials: pd.DataFrame, curves: dict, path) -> str | None:
+    """Mean ± std return and cost vs env steps; one row per group, one line per swept value."""
+    rows = []
+    for label, param, sub in _panels(trials, swept_only=False):
+        lines = [(lab, [curves[t] for t in r["trial_id"] if t in curves]) for lab, r in _values(sub)]
+        lines = [(lab, fr) for lab, fr in lines
+                 if any(_xy(f, c)[0].size for f in fr for c in ("episode_return", "episode_cost"))]
+        if lines:
+            rows.append((label, param, sub, lines))
+    if not rows:
+        return None
+    fig, axes = plt.subplots(len(rows), 2, figsize=(12, 3.6 * len(rows)), squeeze=False)
+    for (label, param, sub, lines), (ax_r, ax_c) in zip(rows, axes):
+        for i, (lab, frames) in enumerate(lines):
+            name = f"{param}={lab} (n={len(frames)})" if param else f"mean of {len(frames)} seeds"
+            for ax, col in ((ax_r, "episode_return"), (ax_c, "episode_cost")):
+                m = _mean_curve(frames, col)
+                if m is None:
+                    continue
+                x, mean, std = m
+                ax.plot(x, mean, color=f"C{i % 10}", label=name, marker="o" if x.size == 1 else None)
+                ax.fill_between(x, mean - std, mean + std, color=f"C{i % 10}", alpha=0.2)
+        limit = _limit(sub["cost_limit"], *(f["cost_limit"] for _, fr in lines for f in fr
+                                            if isinstance(f, pd.DataFrame) and "cost_limit" in f))
+        if not math.isnan(limit):
+            ax_c.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
+        ax_r.set(title=f"{label}: episode return", xlabel="env steps", ylabel="episode return")
+        ax_c.set(title=f"{label}: episode cost", xlabel="env steps", ylabel="episode cost")
+        ax_r.legend(fontsize=8, loc="best")
+        ax_c.legend(fontsize=8, loc="best")
+    return _save(fig, path)
+
+
+def trial_curve(curve_df: pd.DataFrame, path, title: str) -> str:
+    """A single trial's return and cost vs env steps (cost limit dashed), saved as PNG."""
+    fig, (ax_r, ax_c) = plt.subplots(1, 2, figsize=(11, 3.6))
+    for ax, col, name in ((ax_r, "episode_return", "episode return"),
+                          (ax_c, "episode_cost", "episode cost")):
+        x, y = _xy(curve_df, col)
+        ax.plot(x, y, marker="o" if x.size == 1 else None, label=name)
+        ax.set(title=name, xlabel="env steps", ylabel=name)
+    limit = _limit(curve_df["cost_limit"]) if "cost_limit" in curve_df else math.nan
+    if not math.isnan(limit):
+        ax_c.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
+    ax_c.legend(fontsize=8, loc="best")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir) -> dict[str, str]:
+    """Write summary.csv/.md, best.json, trials.csv and the plots; return {file name: path}."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = summarize(trials)
+    best = best_configuration(summary)
+    summary.to_csv(out / "summary.csv", index=False)
+    (out / "summary.md").write_text(markdown_table(summary), encoding="utf-8")
+    (out / "best.json").write_text(json.dumps(best if best else {"best": None}, indent=2) + "\n")
+    trials.to_csv(out / "trials.csv", index=False)
+    paths = {n: str(out / n) for n in ("summary.csv", "summary.md", "best.json", "trials.csv")}
+    for name, made in (("cost_boxplots.png", cost_box_plots(trials, out / "cost_boxplots.png")),
+                       ("learning_curves.png", learning_curves(trials, curves, out / "learning_curves.png"))):
+        if made:
+            paths[name] = made
+    return paths

@@ -1,0 +1,135 @@
+"""The sweep service: ``python sweeps/run.py --space ablation`` (Ray Tune + Optuna, tracked in MLflow).
+
+Every argument is checked, and the plan printed, before Ray starts. One MLflow parent run per
+sweep, one child run per trial; the Tune experiment lives in ``--storage``/``--name`` so that
+``--resume`` (same arguments) continues a sweep whose driver was killed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `python sweeps/run.py` from a checkout
+
+from sweeps import spaces  # noqa: E402
+from sweeps.tracking import check_reachable, default_tracking_uri  # noqa: E402
+
+# Rough env steps per second of one trial (sampling + learning, 1 CPU) for the plan's estimate.
+RATE = {"tiny": 700.0, "safety_gym": 250.0, "mujoco": 500.0}
+STARTUP_S = 15.0
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="sweeps/run.py", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--space", required=True, choices=spaces.SPACES, help="which search space")
+    p.add_argument("--task", default=None, help=f"task id (default {spaces.DEFAULT_TASK}; smoke: {spaces.SMOKE_TASK}; paper: all paper tasks)")
+    p.add_argument("--budget", default="quick", choices=list(spaces.BUDGETS),
+                   help="; ".join(f"{k}: {b.timesteps} steps, {b.doc}" for k, b in spaces.BUDGETS.items()))
+    p.add_argument("--seeds", type=int, default=3, help="seeds per configuration (grid spaces)")
+    p.add_argument("--num-samples", type=int, default=20, help="Optuna samples (search space)")
+    p.add_argument("--max-concurrent", type=int, default=None, help="trials at once (default: CPUs / cpus-per-trial)")
+    p.add_argument("--cpus-per-trial", type=int, default=1, help="CPUs (and torch threads) per trial")
+    p.add_argument("--scheduler", choices=("none", "asha"), default="none")
+    p.add_argument("--address", default=None, help="Ray cluster address (host:port or auto); default: local Ray")
+    p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI (default: sqlite store in the working dir)")
+    p.add_argument("--experiment", default="lac-sweeps", help="MLflow experiment name")
+    p.add_argument("--storage", default="ray_results", help="Tune storage path (shared by all nodes on a cluster)")
+    p.add_argument("--name", default=None, help="sweep name (default: space-task-budget); --resume finds it by name")
+    p.add_argument("--resume", action="store_true", help="continue the sweep of the same name")
+    p.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial (node loss)")
+    p.add_argument("--optuna-seed", type=int, default=0, help="seed of the TPE sampler")
+    return p.parse_args(argv)
+
+
+def check_address(address: str | None) -> None:
+    if address in (None, "auto", "local"):
+        return
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"--address {address!r}: accepted: auto, HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as e:
+        raise ValueError(f"--address {address}: cannot connect ({e}); is `ray start --head` running there?") from None
+
+
+def make_plan(args) -> dict:
+    spaces.validate(args.space, args.task, args.budget, args.seeds)
+    for flag in ("num_samples", "cpus_per_trial", "max_concurrent"):
+        v = getattr(args, flag)
+        if v is not None and v < 1:
+            raise ValueError(f"--{flag.replace('_', '-')} {v} is invalid; accepted: an integer >= 1")
+    check_address(args.address)
+    uri = args.tracking_uri or default_tracking_uri()
+    check_reachable(uri)
+    task = spaces.default_task(args.space, args.task)
+    budget = spaces.BUDGETS[args.budget]
+    trials = spaces.grid(args.space, task, args.seeds) if args.space != "search" else None
+    n_trials = len(trials) if trials is not None else args.num_samples
+    concurrency = args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial)
+    presets = {_preset(t.task) for t in trials} if trials else {_preset(task)}
+    per_trial = STARTUP_S + budget.timesteps / min(RATE[p] for p in presets) / args.cpus_per_trial ** 0.5
+    name = args.name or f"{args.space}-{(task or 'paper').split('/')[-1]}-{args.budget}"
+    return {
+        "space": args.space, "task": task, "budget": args.budget, "timesteps": budget.timesteps,
+        "trials": trials, "n_trials": n_trials, "concurrency": min(concurrency, n_trials),
+        "estimated_wall_s": per_trial * math.ceil(n_trials / min(concurrency, n_trials)),
+        "tracking_uri": uri, "experiment": args.experiment, "name": name,
+        "storage": str(Path(args.storage).resolve()) if "://" not in args.storage else args.storage,
+    }
+
+
+def _preset(task: str) -> str:
+    from lac_rllib.tasks import get_task
+
+    return get_task(task).preset
+
+
+def print_plan(plan: dict, args) -> None:
+    print(f"LAC sweep '{plan['name']}': space={plan['space']} task={plan['task'] or 'all paper tasks'} budget={plan['budget']}")
+    print(f"  trials: {plan['n_trials']}  ({'Optuna TPE samples' if plan['trials'] is None else f'{args.seeds} seed(s) per configuration'})")
+    print(f"  env steps per trial: {plan['timesteps']:,}   concurrency: {plan['concurrency']} x {args.cpus_per_trial} CPU"
+          f"{'' if not args.address else ' (cluster: capped by its CPUs)'}")
+    print(f"  estimated wall time: ~{plan['estimated_wall_s'] / 60:.0f} min (rough)")
+    print(f"  MLflow: {plan['tracking_uri']}  experiment '{plan['experiment']}'")
+    print(f"  Tune results: {plan['storage']}/{plan['name']}{'  (resuming)' if args.resume else ''}")
+    print(f"  browse: mlflow ui --backend-store-uri {plan['tracking_uri']}", flush=True)
+
+
+def git_commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
+                              cwd=Path(__file__).parent).stdout.strip() or "unknown"
+    except OSError:
+        return "unknown"
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    try:
+        plan = make_plan(args)
+        sweep_dir = Path(plan["storage"]) / plan["name"]
+        if args.resume and not (sweep_dir / "sweep.json").exists():
+            raise ValueError(f"--resume: no sweep named {plan['name']!r} under {plan['storage']}")
+        if not args.resume and sweep_dir.exists():
+            raise ValueError(f"a sweep named {plan['name']!r} exists under {plan['storage']}; pass --resume or --name")
+    except ValueError as e:
+        print(f"sweeps/run.py: error: {e}", file=sys.stderr)
+        return 2
+    print_plan(plan, args)
+
+    from sweeps.sweep import run_sweep
+
+    return run_sweep(plan, args, sweep_dir, git_commit())
+
+
+if __name__ == "__main__":
+    sys.exit(main())

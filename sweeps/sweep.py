@@ -1,0 +1,140 @@
+"""Running a planned sweep on Ray Tune and closing it in MLflow (called by ``sweeps/run.py``)."""
+
+from __future__ import annotations
+
+import json
+import platform
+import tempfile
+from pathlib import Path
+
+import ray
+from ray import tune
+from ray.tune.schedulers import ASHAScheduler
+from ray.tune.search.optuna import OptunaSearch
+
+from sweeps import spaces
+from sweeps.tracking import SweepTracker
+from sweeps.trainable import LACTrainable
+
+METRIC, MODE = "objective", "max"
+TABLE_COLUMNS = ["env_steps", "episode_return", "episode_cost", "nu", METRIC]
+
+
+class ConstrainedOptunaSearch(OptunaSearch):
+    """OptunaSearch that hands each trial's constraint value (episode cost − limit, ≤ 0 is
+    feasible) to Optuna, whose TPE sampler reads it (NOTES.md: Tune's class never does)."""
+
+    def on_trial_complete(self, trial_id, result=None, error=False):
+        ot_trial = self._ot_trials.get(trial_id)
+        if ot_trial is not None and result and result.get("constraint") is not None:
+            ot_trial.set_constraint("episode_cost_minus_limit", float(result["constraint"]))
+        super().on_trial_complete(trial_id, result=result, error=error)
+
+
+def versions() -> dict:
+    import mlflow
+    import torch
+
+    from lac_rllib.tasks.versions import runtime_versions
+
+    return {"ray": ray.__version__, "torch": torch.__version__, "mlflow": mlflow.__version__,
+            "platform": platform.platform(), **runtime_versions()}
+
+
+def param_space(plan: dict, args, parent_run_id: str) -> dict:
+    common = {
+        "timesteps": plan["timesteps"], "cpus": args.cpus_per_trial,
+        "tracking": {"uri": plan["tracking_uri"], "experiment": plan["experiment"], "parent_run_id": parent_run_id},
+    }
+    budget = spaces.BUDGETS[plan["budget"]].overrides
+    if plan["trials"] is None:  # search: Optuna samples the LAC fields
+        return {**common, "task": plan["task"], "seed": 0, "group": "search", "param": "", "value": None,
+                "budget_overrides": budget, "overrides": spaces.tune_search_space()}
+    return {**common, "trial": tune.grid_search([
+        {"task": t.task, "seed": t.seed, "group": t.group, "param": t.param, "value": t.value, "label": t.label(),
+         "overrides": {**budget, **t.overrides}, "fail_at_iteration": t.fail_at_iteration}
+        for t in plan["trials"]])}
+
+
+def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
+    if not ray.is_initialized():  # tests drive sweeps inside their own Ray session
+        ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    tracker = SweepTracker(plan["tracking_uri"], plan["experiment"])
+    state_file = sweep_dir / "sweep.json"
+    previous = json.loads(state_file.read_text()) if args.resume else {}
+    parent = tracker.start(
+        plan["name"],
+        params={k: v for k, v in vars(args).items()} | {"n_trials": plan["n_trials"], "timesteps": plan["timesteps"],
+                                                        "git_commit": commit, **versions()},
+        tags={"lac.space": plan["space"], "lac.budget": plan["budget"], "lac.sweep_name": plan["name"]},
+        run_id=previous.get("parent_run_id"),
+    )
+    trainable = tune.with_resources(LACTrainable, {"cpu": args.cpus_per_trial})
+    failure = tune.FailureConfig(max_failures=args.max_failures)
+    ckpt = tune.CheckpointConfig(checkpoint_frequency=1, num_to_keep=2, checkpoint_at_end=True)
+    run_config = tune.RunConfig(
+        name=plan["name"], storage_path=plan["storage"], failure_config=failure, checkpoint_config=ckpt,
+        progress_reporter=tune.CLIReporter(metric_columns=TABLE_COLUMNS, max_report_frequency=30),
+        verbose=1,
+    )
+    if args.resume:
+        tuner = tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True,
+                                   resume_errored=False)
+    else:
+        search = None
+        if plan["trials"] is None:
+            import optuna
+
+            search = ConstrainedOptunaSearch(sampler=optuna.samplers.TPESampler(seed=args.optuna_seed),
+                                             metric=METRIC, mode=MODE)
+        scheduler = (ASHAScheduler(time_attr="env_steps", metric=METRIC, mode=MODE, max_t=plan["timesteps"],
+                                   grace_period=max(1, plan["timesteps"] // 4)) if args.scheduler == "asha" else None)
+        tuner = tune.Tuner(
+            trainable, param_space=param_space(plan, args, parent),
+            tune_config=tune.TuneConfig(num_samples=plan["n_trials"] if search else 1, search_alg=search,
+                                        scheduler=scheduler, max_concurrent_trials=plan["concurrency"]),
+            run_config=run_config,
+        )
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    if not args.resume:
+        plan_json = {k: v for k, v in plan.items() if k != "trials"} | {
+            "trial_labels": [t.label() for t in plan["trials"]] if plan["trials"] else None}
+        tracker.client.log_text(parent, json.dumps(plan_json, indent=2, default=str), "plan.json")
+    state_file.write_text(json.dumps({"parent_run_id": parent, "plan": {k: v for k, v in plan.items() if k != "trials"}}))
+    grid = tuner.fit()
+    n_errors = sum(1 for r in grid if r.error)
+    close_sweep(tracker, parent, n_errors)
+    print(f"sweep done: {len(grid)} trials, {n_errors} failed; MLflow parent run {parent}")
+    print(f"  mlflow ui --backend-store-uri {plan['tracking_uri']}")
+    return 0
+
+
+def close_sweep(tracker: SweepTracker, parent: str, n_errors: int) -> None:
+    """Summary table, best configuration and plots on the parent run, read back from MLflow
+    (the record of every trial, resumed ones included)."""
+    import pandas as pd
+
+    from sweeps.report import write_sweep_reports
+
+    rows, curves = [], {}
+    for run in tracker.children(parent):
+        p, m, tid = run.data.params, run.data.metrics, run.data.tags.get("lac.trial_id", run.info.run_id)
+        value = json.loads(p.get("swept_value", "null"))
+        rows.append({"trial_id": tid, "group": p.get("group", ""), "param": p.get("swept_param", ""), "value": value,
+                     "task": p.get("task"), "seed": int(p.get("seed", 0)),
+                     "status": "TERMINATED" if run.info.status == "FINISHED" else "ERROR",
+                     **{k: m.get(k, float("nan")) for k in ("episode_return", "episode_cost", "cost_limit",
+                                                            "feasible", "objective")},
+                     **{k: p[k] for k in ("langevin_steps", "langevin_step_size", "temperature", "beta") if k in p}})
+        hist = {k: tracker.client.get_metric_history(run.info.run_id, k) for k in ("episode_return", "episode_cost")}
+        curves[tid] = pd.DataFrame({"env_steps": [x.step for x in hist["episode_return"]],
+                                    "episode_return": [x.value for x in hist["episode_return"]],
+                                    "episode_cost": [x.value for x in hist["episode_cost"]][:len(hist["episode_return"])],
+                                    "cost_limit": m.get("cost_limit", float("nan"))})
+    trials = pd.DataFrame(rows)
+    with tempfile.TemporaryDirectory() as tmp:
+        if len(trials):
+            write_sweep_reports(trials, curves, tmp)
+        tracker.client.log_artifacts(parent, tmp, "summary")
+    tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
+    tracker.client.set_terminated(parent, status="FINISHED")

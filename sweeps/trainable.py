@@ -1,0 +1,116 @@
+"""LACTrainable: one sweep trial = one LAC run inside a Tune trial, tracked in its MLflow child run.
+
+Tune owns scheduling, checkpoints (``save_checkpoint`` writes the RLlib checkpoint), restore and
+failure handling; this class only adapts LAC to it and reports. A trial that raises or produces
+NaN is marked FAILED in MLflow with the error before Tune marks it ERROR.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import tempfile
+import traceback
+
+import ray
+from ray import tune
+
+from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+from lac_rllib.train import build_config
+from sweeps.tracking import CHECKPOINT_TAG, NODE_TAG, TrialTracker
+
+LEARNER_KEYS = ("critic_loss", "actor_loss", "actor_nll", "actor_kl", "q_reward_mean", "q_cost_mean",
+                "langevin_energy_drop", "langevin_displacement")
+INFEASIBLE_OFFSET = 1e6
+
+
+def objective(ret: float, cost: float, limit: float) -> float:
+    """One scalar for Tune/ASHA/Optuna: feasible trials rank by return; every infeasible trial
+    ranks below every feasible one (−10⁶ − violation), and less violation ranks higher."""
+    if math.isnan(ret) or math.isnan(cost):
+        return -2 * INFEASIBLE_OFFSET
+    return ret if cost <= limit else -INFEASIBLE_OFFSET - (cost - limit)
+
+
+class LACTrainable(tune.Trainable):
+    """config: task, seed, timesteps, overrides, group/param/value, tracking{uri, experiment,
+    parent_run_id}, cpus; ``fail_at_iteration`` makes the trial raise (tests the failure path)."""
+
+    def setup(self, config: dict) -> None:
+        # Grid trials carry their point under "trial"; search trials get sampled "overrides"
+        # on top of the budget's.
+        config = {**config, **config.get("trial", {})}
+        self.spec = config
+        overrides = {**config.get("budget_overrides", {}), **config.get("overrides", {}),
+                     "torch_threads": int(config.get("cpus", 1))}
+        self.lac_config = build_config(config["task"], int(config["seed"]), overrides)
+        self.algo = self.lac_config.build_algo()
+        self.timesteps = int(config["timesteps"])
+        tr = config["tracking"]
+        self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
+                                    config.get("label") or f"search-{self.trial_name}")
+        params = {"task": config["task"], "seed": config["seed"], "group": config.get("group", ""),
+                  "swept_param": config.get("param", ""), "swept_value": config.get("value"),
+                  "timesteps": self.timesteps, **self.lac_config.lac_params()}
+        tags = {NODE_TAG: ray.get_runtime_context().get_node_id(), "lac.host": socket.gethostname(),
+                "lac.tune_trial_name": self.trial_name, "lac.group": config.get("group", "")}
+        self.tracker.open(params, tags)
+        self.tracker.set_tags({NODE_TAG: tags[NODE_TAG]})  # the node of the latest (re)start
+        self.tracker.log_text(json.dumps({**params, "cost_limit": self.lac_config.effective_cost_limit},
+                                         indent=2, default=str), "config.json")
+
+    def step(self) -> dict:
+        try:
+            if self.iteration + 1 == self.spec.get("fail_at_iteration"):
+                raise RuntimeError(f"injected failure at iteration {self.iteration + 1} (fail_at_iteration)")
+            r = self.algo.train()
+            learner = r.get("learners", {}).get("default_policy", {})
+            metrics = {k: float(r[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
+            metrics.update({k: float(learner[k]) for k in LEARNER_KEYS if k in learner})
+            bad = [k for k in ("critic_loss", "actor_loss", NU) if k in metrics and not math.isfinite(metrics[k])]
+            if bad:
+                raise FloatingPointError(f"non-finite {', '.join(bad)} at iteration {self.iteration + 1}")
+            metrics["objective"] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])
+            metrics["constraint"] = metrics[EPISODE_COST] - metrics[COST_LIMIT]  # ≤ 0 is feasible
+            metrics["wall_time_s"] = float(r.get("time_total_s", 0.0))
+            self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
+            done = metrics[ENV_STEPS] >= self.timesteps
+            if done:
+                self._finish_run()
+            return {**metrics, "done": done}
+        except Exception as e:
+            self.tracker.set_tags({"lac.error": f"{type(e).__name__}: {e}"[:4000]})
+            self.tracker.log_text(traceback.format_exc(), "error.txt")
+            self.tracker.finish("FAILED")
+            raise
+
+    def _finish_run(self) -> None:
+        """Final checkpoint and learning curve as artifacts, then close the MLflow run."""
+        from sweeps.report import trial_curve
+
+        with tempfile.TemporaryDirectory() as tmp:
+            self.algo.save_to_path(os.path.join(tmp, "checkpoint"))
+            self.tracker.log_artifacts(os.path.join(tmp, "checkpoint"), "checkpoint")
+            history = self.tracker.client.get_metric_history(self.tracker.run_id, EPISODE_RETURN)
+            costs = self.tracker.client.get_metric_history(self.tracker.run_id, EPISODE_COST)
+            import pandas as pd
+
+            curve = pd.DataFrame({"env_steps": [m.step for m in history], "episode_return": [m.value for m in history],
+                                  "episode_cost": [m.value for m in costs[:len(history)]],
+                                  "cost_limit": self.lac_config.effective_cost_limit})
+            trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
+            self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
+        self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint"})
+        self.tracker.finish("FINISHED")
+
+    def save_checkpoint(self, checkpoint_dir: str) -> None:
+        self.algo.save_to_path(checkpoint_dir)
+
+    def load_checkpoint(self, checkpoint: str) -> None:
+        self.algo.restore_from_path(checkpoint)
+
+    def cleanup(self) -> None:
+        self.tracker.flush()
+        self.algo.stop()

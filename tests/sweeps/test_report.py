@@ -1,0 +1,135 @@
+"""Tests for sweeps/report.py (pure pandas/matplotlib, no Ray)."""
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # repo root: `sweeps` is not installed
+
+from sweeps import report  # noqa: E402
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+NAN = math.nan
+
+
+def _trial(tid, value, seed, ret, cost, group="VT", param="langevin_steps", status="TERMINATED",
+           limit=25.0, task="PointGoal1"):
+    feasible = float(cost <= limit) if not math.isnan(cost) else NAN
+    return dict(trial_id=tid, group=group, param=param, value=value, task=task, seed=seed,
+                status=status, episode_return=ret, episode_cost=cost, cost_limit=limit,
+                feasible=feasible, objective=ret if feasible == 1.0 else ret - 100, lr=3e-4)
+
+
+def hand_table(limit=25.0):
+    rows = [
+        _trial("a0", 10, 0, 10.0, 20.0, limit=limit),
+        _trial("a1", 10, 1, 12.0, 24.0, limit=limit),
+        _trial("a2", 10, 2, 14.0, 28.0, limit=limit),
+        _trial("a3", 10, 3, NAN, NAN, status="ERROR", limit=limit),
+        _trial("a4", 10, 4, NAN, 5.0, limit=limit),  # finished but no return: counts as failed
+        _trial("a5", 10, 5, 99.0, 1.0, status="ERROR", limit=limit),  # errored late, stale metrics
+        _trial("b0", 20, 0, 30.0, 40.0, limit=limit),  # highest return, infeasible
+        _trial("b1", 20, 1, 32.0, 44.0, limit=limit),
+        _trial("c0", 30, 0, 20.0, 10.0, limit=limit),  # single seed, feasible
+        _trial("d0", 100, 0, NAN, NAN, status="ERROR", limit=limit),
+        _trial("n0", 50, 0, 1.0, 1.0, group="NI", limit=limit),
+    ]
+    return pd.DataFrame(rows)
+
+
+def sweep():
+    """NI/VT/PR ablations (several values × 2-3 seeds), a 'paper' group and one errored trial."""
+    rng = np.random.default_rng(0)
+    rows, curves = [], {}
+    spec = {"NI": ("langevin_steps", [30, 50, 100, 200], 3), "VT": ("langevin_steps", [10, 20, 40], 2),
+            "PR": ("beta", [0.0, 1.0, 5.0, 20.0], 3), "paper": ("", [None], 3)}
+    for group, (param, values, n) in spec.items():
+        for vi, v in enumerate(values):
+            for s in range(n):
+                tid = f"{group}_{v}_{s}"
+                steps = np.arange(1, 21 + s) * 5000.0  # seeds of unequal length
+                ret = 15 * (1 - np.exp(-steps / 3e4)) + vi + rng.normal(0, 1, steps.size)
+                cost = 60 * np.exp(-steps / 4e4) + 15 + 3 * vi + rng.normal(0, 2, steps.size)
+                curves[tid] = pd.DataFrame(dict(env_steps=steps, episode_return=ret,
+                                                episode_cost=cost, cost_limit=25.0))
+                rows.append(_trial(tid, v, s, ret[-1], cost[-1], group=group, param=param))
+    rows.append(_trial("VT_err", 50, 9, NAN, NAN, status="ERROR"))
+    return pd.DataFrame(rows), curves
+
+
+def assert_png(path):
+    p = Path(path)
+    assert p.exists() and p.stat().st_size > 1024
+    assert p.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_summarize_statistics_and_order():
+    s = report.summarize(hand_table())
+    assert list(zip(s["group"], s["value"])) == [("NI", 50), ("VT", 10), ("VT", 20), ("VT", 30), ("VT", 100)]
+    r = s[(s["group"] == "VT") & (s["value"] == 10)].iloc[0]
+    assert (r["n_seeds"], r["n_failed"]) == (3, 3)
+    assert r["return_mean"] == pytest.approx(12.0) and r["return_std"] == pytest.approx(2.0)
+    assert r["cost_mean"] == pytest.approx(24.0) and r["cost_std"] == pytest.approx(4.0)
+    assert r["feasible_fraction"] == pytest.approx(2 / 3) and bool(r["mean_feasible"])
+    assert r["cost_limit"] == 25.0 and r["objective_mean"] == pytest.approx((10 + 12 + 14 - 100) / 3)
+    single = s[s["value"] == 30].iloc[0]
+    assert single["n_seeds"] == 1 and math.isnan(single["return_std"])
+    dead = s[s["value"] == 100].iloc[0]
+    assert (dead["n_seeds"], dead["n_failed"]) == (0, 1)
+    assert math.isnan(dead["return_mean"]) and not bool(dead["mean_feasible"])
+    assert not bool(s[s["value"] == 20].iloc[0]["mean_feasible"])
+
+
+def test_best_configuration_prefers_feasible_and_none_when_infeasible():
+    best = report.best_configuration(report.summarize(hand_table()))
+    assert (best["group"], best["value"], best["return_mean"]) == ("VT", 30, 20.0)
+    assert best["return_std"] is None  # NaN std becomes JSON null
+    json.dumps(best)  # plain Python types only
+    assert report.best_configuration(report.summarize(hand_table(limit=0.5))) is None
+
+
+def test_markdown_table():
+    s = report.summarize(hand_table())
+    md = report.markdown_table(s)
+    assert "| group | swept | value | task | seeds | return (mean ± std) | cost (mean ± std) | limit | feasible |" in md
+    body = [ln for ln in md.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
+    assert len(body) == len(s) == 5
+    assert "| VT | langevin_steps | 10 | PointGoal1 | 3 (+3 failed) | 12.00 ± 2.00 | 24.00 ± 4.00 | 25.00 |" in md
+    assert "20.00 ± –" in md and "nan" not in md.lower()
+    assert "| 0 (+1 failed) | – | – | 25.00 | no (all failed) |" in md
+    assert "**Best feasible configuration:** VT langevin_steps=30 on PointGoal1" in md
+    assert "none" in report.markdown_table(report.summarize(hand_table(limit=0.5))).splitlines()[-1]
+
+
+def test_plots_write_pngs(tmp_path):
+    trials, curves = sweep()
+    assert_png(report.cost_box_plots(trials, tmp_path / "box.png"))
+    assert_png(report.learning_curves(trials, curves, tmp_path / "curves.png"))
+    assert_png(report.trial_curve(curves["VT_10_0"], tmp_path / "one.png", "VT_10_0"))
+
+
+def test_plots_return_none_when_nothing_to_plot(tmp_path):
+    trials, curves = sweep()
+    unswept = trials[trials["group"] == "paper"]
+    assert report.cost_box_plots(unswept, tmp_path / "a.png") is None
+    assert report.cost_box_plots(trials[trials["status"] == "ERROR"], tmp_path / "b.png") is None
+    assert report.learning_curves(trials, {}, tmp_path / "c.png") is None
+    assert not any(tmp_path.iterdir())
+
+
+def test_write_sweep_reports(tmp_path):
+    trials, curves = sweep()
+    paths = report.write_sweep_reports(trials, curves, tmp_path / "out")
+    names = {"summary.csv", "summary.md", "best.json", "trials.csv", "cost_boxplots.png", "learning_curves.png"}
+    assert set(paths) == names and all(Path(p).exists() for p in paths.values())
+    n_configs = 4 + 4 + 4 + 1  # NI + VT (incl. the all-errored value 50) + PR + paper
+    assert len(pd.read_csv(paths["summary.csv"])) == n_configs
+    assert len(pd.read_csv(paths["trials.csv"])) == len(trials)
+    best = json.loads(Path(paths["best.json"]).read_text())
+    assert best["mean_feasible"] is True and best["n_seeds"] >= 2
+    assert_png(paths["learning_curves.png"])

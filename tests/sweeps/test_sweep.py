@@ -1,0 +1,157 @@
+"""The sweep service end to end, checked through MLflow's client (and Optuna's study)."""
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mlflow.tracking import MlflowClient
+
+from sweeps import run as cli
+from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _args(tmp_path, *extra):
+    return cli.parse_args(["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--max-concurrent", "2",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                           "--storage", str(tmp_path / "ray_results"), "--experiment", "test", *extra])
+
+
+def _runs(tmp_path):
+    client = MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")
+    exp = client.get_experiment_by_name("test")
+    runs = client.search_runs([exp.experiment_id], max_results=1000)
+    parents = [r for r in runs if r.data.tags.get("lac.sweep") == "1"]
+    children = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
+    return client, parents, children
+
+
+def _sweep(tmp_path, args, mutate=None):
+    plan = cli.make_plan(args)
+    if mutate:
+        plan["trials"] = mutate(plan["trials"])
+    return run_sweep(plan, args, Path(plan["storage"]) / plan["name"], "test-commit")
+
+
+def test_smoke_sweep_end_to_end(ray_session, tmp_path):
+    assert _sweep(tmp_path, _args(tmp_path)) == 0
+    client, parents, children = _runs(tmp_path)
+    assert len(parents) == 1 and len(children) == 4
+    parent = parents[0]
+    assert parent.info.status == "FINISHED"
+    assert {"ray", "torch", "mujoco", "numpy", "git_commit", "space", "seeds"} <= set(parent.data.params)
+    summary = {a.path for a in client.list_artifacts(parent.info.run_id, "summary")}
+    assert {"summary/summary.csv", "summary/summary.md", "summary/best.json", "summary/cost_boxplots.png",
+            "summary/learning_curves.png"} <= summary
+    assert "plan.json" in {a.path for a in client.list_artifacts(parent.info.run_id)}
+    assert sorted(json.loads(c.data.params["langevin_steps"]) for c in children) == [5, 5, 10, 10]
+    for c in children:
+        assert c.info.status == "FINISHED" and c.data.tags["mlflow.parentRunId"] == parent.info.run_id
+        assert {"task", "seed", "temperature", "beta", "langevin_start", "swept_param"} <= set(c.data.params)
+        assert c.data.tags.get("lac.node_id")
+        hist = client.get_metric_history(c.info.run_id, "episode_cost")
+        assert [m.step for m in hist] == [500, 1000, 1500, 2000]
+        for key in ("episode_return", "cost_limit", "nu", "critic_loss", "actor_loss", "env_steps", "wall_time_s"):
+            assert len(client.get_metric_history(c.info.run_id, key)) == 4, key
+        arts = {a.path for a in client.list_artifacts(c.info.run_id)}
+        assert {"checkpoint", "config.json", "learning_curve.png"} <= arts
+        assert client.list_artifacts(c.info.run_id, "checkpoint"), "checkpoint directory is empty"
+
+
+def test_a_failing_trial_does_not_stop_the_others(ray_session, tmp_path):
+    args = _args(tmp_path, "--max-failures", "0", "--seeds", "1")
+    fail_first = lambda trials: [dataclasses.replace(trials[0], fail_at_iteration=2), *trials[1:]]  # noqa: E731
+    assert _sweep(tmp_path, args, fail_first) == 0
+    client, parents, children = _runs(tmp_path)
+    status = {json.loads(c.data.params["langevin_steps"]): c for c in children}
+    assert status[5].info.status == "FAILED" and "injected failure" in status[5].data.tags["lac.error"]
+    assert len(client.get_metric_history(status[5].info.run_id, "episode_return")) == 1  # kept
+    assert status[10].info.status == "FINISHED"
+    assert parents[0].data.tags["lac.failed_trials"] == "1"
+
+
+def test_search_hands_constraints_to_optuna(ray_session, tmp_path):
+    args = cli.parse_args(["--space", "search", "--task", "lac/PointHazard-v0", "--budget", "smoke",
+                           "--num-samples", "3", "--max-concurrent", "2",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                           "--storage", str(tmp_path / "ray_results"), "--experiment", "test"])
+    assert _sweep(tmp_path, args) == 0
+    searcher = ConstrainedOptunaSearch()
+    searcher.restore_from_dir(str(tmp_path / "ray_results" / "search-PointHazard-v0-smoke"))
+    trials = searcher._ot_study.trials
+    assert len(trials) == 3
+    _, _, children = _runs(tmp_path)
+    expected = sorted(round(c.data.metrics["constraint"], 6) for c in children)
+    got = sorted(round(t.system_attrs["constraints:episode_cost_minus_limit"], 6)
+                 if "constraints:episode_cost_minus_limit" in t.system_attrs else
+                 round(t.system_attrs["constraints"][0], 6) for t in trials)
+    assert got == expected
+    sampled = {json.loads(c.data.params["temperature"]) for c in children}
+    assert len(sampled) == 3 and all(1e-4 <= t <= 1e-2 for t in sampled)
+
+
+def _cli(tmp_path, *extra, **kw):
+    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", "--budget", "smoke", "--seeds", "2",
+           "--max-concurrent", "1", "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+           "--storage", str(tmp_path / "ray_results"), "--experiment", "test", *extra]
+    return subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
+
+
+def test_resume_after_driver_sigkill(tmp_path):
+    proc = _cli(tmp_path, start_new_session=True)
+    deadline, finished = time.time() + 300, []
+    try:
+        while time.time() < deadline:  # wait for one finished trial and one started after it
+            time.sleep(2)
+            if (tmp_path / "mlflow.db").exists():
+                try:
+                    _, _, children = _runs(tmp_path)
+                except Exception:  # noqa: BLE001 - the store may be mid-creation
+                    continue
+                finished = [c for c in children if c.info.status == "FINISHED"]
+                if finished and len(children) >= 2:
+                    break
+        assert finished, "no trial finished before the deadline"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the driver and everything it started
+        proc.wait()
+    before = {c.data.tags["lac.trial_id"]: c.info.end_time for c in finished}
+
+    resumed = _cli(tmp_path, "--resume")
+    out, _ = resumed.communicate(timeout=600)
+    assert resumed.returncode == 0, out[-3000:]
+    client, parents, children = _runs(tmp_path)
+    assert len(parents) == 1
+    ids = [c.data.tags["lac.trial_id"] for c in children]
+    assert len(children) == 4 and len(set(ids)) == 4, "one MLflow run per trial"
+    assert all(c.info.status == "FINISHED" for c in children)
+    for c in children:
+        if c.data.tags["lac.trial_id"] in before:  # finished before the kill: not run again
+            assert c.info.end_time == before[c.data.tags["lac.trial_id"]]
+        steps = [m.step for m in client.get_metric_history(c.info.run_id, "env_steps")]
+        assert steps[-1] == 2000 and steps == sorted(steps)
+
+
+@pytest.mark.parametrize("extra,needle", [
+    (["--space", "nope"], "invalid choice: 'nope'"),
+    (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
+    (["--budget", "huge"], "invalid choice: 'huge'"),
+    (["--seeds", "0"], "--seeds 0 is invalid; accepted: an integer >= 1"),
+    (["--tracking-uri", "http://127.0.0.1:9"], "--tracking-uri http://127.0.0.1:9 is unreachable"),
+    (["--address", "127.0.0.1:9"], "--address 127.0.0.1:9: cannot connect"),
+    (["--address", "not an address"], "accepted: auto, HOST:PORT"),
+])
+def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
+    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", *extra]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert needle in proc.stderr
+    assert "Started a local Ray instance" not in proc.stdout + proc.stderr
+    assert not (tmp_path / "ray_results").exists()
