@@ -1,0 +1,174 @@
+"""The Langevin policy: Algorithm 1 of the paper, in the efficient form of SPEC §1.
+
+Algorithm 1 / eq. (9): for i = 1..T,
+
+    ã_i = ã_{i-1} − (η/2)·∇_a E(s, ã_{i-1}) + √η·z_i,     z_i ~ N(0, I),
+
+    E(s, a) = (1/λ)·(ν·max_j Q_Cj(s, a) − min_j Q_Rj(s, a)) − w·log π_φ'(a|s),
+
+started from the target actor, ã_0 ~ π_φ'(·|s) (informative start, eq. 11), or from N(0, I)
+(non-informative, the paper's NI ablation). Theorem 3.1: for an energy that is m-strongly convex
+with l-Lipschitz gradient, the law of ã_T approaches exp(−E)/Z as η → 0, T → ∞.
+
+Efficient form: only what depends on the action is recomputed per step. The critics' first-layer
+state projection and the actor's (μ, σ) are computed once per chain; ∇_a log π is the Gaussian
+closed form; the four critics run as one batched ensemble with a hand-written backward that
+builds no autograd graph. ``naive_langevin_chain`` is the straightforward autograd reference
+that tests and ``benchmarks/langevin.py`` compare against.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+
+from lac_rllib.networks import CriticEnsemble, gaussian_log_prob
+
+GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
+STARTS = ("informative", "noninformative")
+
+
+@dataclass
+class ChainResult:
+    action: torch.Tensor        # (B, A) ã_T, detached
+    energy_start: torch.Tensor  # (B,) E(s, ã_0)
+    energy_end: torch.Tensor    # (B,) E(s, ã_T)
+    displacement: torch.Tensor  # (B,) ‖ã_T − ã_0‖₂
+
+
+def _as_bound(x, like: torch.Tensor):
+    return None if x is None else torch.as_tensor(x, dtype=like.dtype, device=like.device)
+
+
+def _check_chain_args(steps: int, step_size: float, grad_clip) -> None:
+    if not (isinstance(steps, int) and steps >= 1):
+        raise ValueError(f"steps={steps!r}; must be an integer ≥ 1")
+    if not step_size > 0:
+        raise ValueError(f"step_size={step_size!r}; must be > 0")
+    if grad_clip is not None and not grad_clip > 0:
+        raise ValueError(f"grad_clip={grad_clip!r}; must be > 0 or None")
+
+
+@torch.no_grad()
+def run_chain(grad_fn: GradFn, a0: torch.Tensor, *, steps: int, step_size: float,
+              noise: torch.Tensor | None = None, generator: torch.Generator | None = None,
+              low=None, high=None, grad_clip: float | None = None) -> ChainResult:
+    """Generic unadjusted Langevin chain (eq. 9); ``grad_fn(a) -> (E (B,), ∇_a E (B, A))``."""
+    _check_chain_args(steps, step_size, grad_clip)
+    if noise is not None and noise.shape != (steps, *a0.shape):
+        raise ValueError(f"noise.shape={tuple(noise.shape)}; expected {(steps, *a0.shape)}")
+    low, high = _as_bound(low, a0), _as_bound(high, a0)
+    half_eta, sqrt_eta = 0.5 * step_size, math.sqrt(step_size)
+    a0 = a0.detach()
+    a, energy_start = a0, None
+    for i in range(steps):
+        energy, grad = grad_fn(a)
+        if i == 0:
+            energy_start = energy
+        if grad_clip is not None:
+            # Per sample, not one minibatch-wide norm [C]: a single sample with an exploding
+            # gradient must not shrink the step of every other state in the batch (SPEC §1).
+            norm = grad.norm(dim=-1, keepdim=True)
+            grad = grad * (grad_clip / norm.clamp_min(1e-12)).clamp(max=1.0)
+        z = noise[i] if noise is not None else torch.randn(
+            a.shape, generator=generator, dtype=a.dtype, device=a.device)
+        a = a - half_eta * grad + sqrt_eta * z
+        if low is not None or high is not None:
+            a = torch.clamp(a, min=low, max=high)  # [C] keeps the chain inside the action box
+    energy_end, _ = grad_fn(a)
+    return ChainResult(action=a.detach(), energy_start=energy_start, energy_end=energy_end,
+                       displacement=(a - a0).norm(dim=-1))
+
+
+def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch.Tensor,
+                        log_std: torch.Tensor, *, temperature: float, nu,
+                        logp_weight: float) -> GradFn:
+    """grad_fn for the LAC energy; ``proj``/``mean``/``log_std`` are fixed along the chain."""
+    nr = critics.n_reward
+    inv_lam = 1.0 / temperature
+    nu = torch.as_tensor(nu, dtype=mean.dtype, device=mean.device)
+    mean, log_std = mean.detach(), log_std.detach()
+    inv_var = torch.exp(-2.0 * log_std)
+    # −w·log π(a) = w·(½ Σ (a−μ)²/σ² + Σ log σ + (A/2)·log 2π); the a-free part is hoisted.
+    logp_const = logp_weight * (log_std.sum(-1) + 0.5 * mean.shape[-1] * math.log(2 * math.pi))
+    cols = torch.arange(mean.shape[0], device=mean.device)
+
+    def coef_of(q: torch.Tensor) -> torch.Tensor:
+        # min/max are piecewise: the (sub)gradient flows through the selected member only,
+        # −1/λ on the argmin reward critic and +ν/λ on the argmax cost critic, per sample.
+        c = torch.zeros_like(q)
+        c[q[:nr].argmin(0), cols] = -inv_lam
+        if critics.n_cost:
+            c[nr + q[nr:].argmax(0), cols] = nu * inv_lam
+        return c
+
+    def grad_fn(a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        q, grad_q = critics.q_and_action_grad(proj, a, coef_of)
+        diff = a - mean
+        energy = -inv_lam * q[:nr].min(0).values
+        if critics.n_cost:
+            energy = energy + nu * inv_lam * q[nr:].max(0).values
+        energy = energy + logp_weight * 0.5 * (diff * diff * inv_var).sum(-1) + logp_const
+        return energy, grad_q + logp_weight * diff * inv_var   # ∇(−w log π) = w(a−μ)/σ²
+
+    return grad_fn
+
+
+def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tensor,
+                   log_std: torch.Tensor, *, steps: int, step_size: float, temperature: float,
+                   nu, logp_weight: float = 1.0, start: str = "informative", low=None, high=None,
+                   grad_clip: float | None = None, noise: torch.Tensor | None = None,
+                   generator: torch.Generator | None = None) -> ChainResult:
+    """Algorithm 1 at states ``obs``; ``mean``/``log_std`` are the TARGET actor's π_φ'(·|s).
+
+    ``noise`` (optional, for reproducible comparisons) is (T+1, B, A): ``noise[0]`` is z₀ of the
+    start, ``noise[1:]`` the step noise; otherwise all noise is drawn from ``generator``.
+    """
+    _check_chain_args(steps, step_size, grad_clip)
+    if not temperature > 0:
+        raise ValueError(f"temperature={temperature!r}; must be > 0")
+    if start not in STARTS:
+        raise ValueError(f"start={start!r}; accepted: {STARTS}")
+    if float(nu) < 0:
+        raise ValueError(f"nu={float(nu)!r}; must be ≥ 0")
+    shape = mean.shape
+    if noise is not None and noise.shape != (steps + 1, *shape):
+        raise ValueError(f"noise.shape={tuple(noise.shape)}; expected {(steps + 1, *shape)}")
+    with torch.no_grad():
+        mean, log_std = mean.detach(), log_std.detach().expand_as(mean)
+        z0 = noise[0] if noise is not None else torch.randn(
+            shape, generator=generator, dtype=mean.dtype, device=mean.device)
+        # eq. (11): start from the generator's own sample; NI: start from N(0, I).
+        a0 = mean + torch.exp(log_std) * z0 if start == "informative" else z0
+        proj = critics.project_state(obs)
+        grad_fn = lac_energy_and_grad(critics, proj, mean, log_std, temperature=temperature,
+                                      nu=nu, logp_weight=logp_weight)
+        return run_chain(grad_fn, a0, steps=steps, step_size=step_size,
+                         noise=None if noise is None else noise[1:], generator=generator,
+                         low=low, high=high, grad_clip=grad_clip)
+
+
+def naive_langevin_chain(critics: CriticEnsemble, actor_mean_logstd_fn, obs: torch.Tensor,
+                         a0: torch.Tensor, *, steps: int, step_size: float, temperature: float,
+                         nu, logp_weight: float, low, high, noise: torch.Tensor) -> ChainResult:
+    """Reference: autograd through the full critics and a fresh actor forward at every step."""
+    nr = critics.n_reward
+
+    def energy_of(a: torch.Tensor) -> torch.Tensor:
+        mean, log_std = actor_mean_logstd_fn(obs)
+        q = critics(obs, a)
+        logp = torch.distributions.Normal(mean, log_std.exp()).log_prob(a).sum(-1)
+        return (nu * q[nr:].max(0).values - q[:nr].min(0).values) / temperature - logp_weight * logp
+
+    def grad_fn(a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        with torch.enable_grad():
+            a = a.detach().requires_grad_(True)
+            energy = energy_of(a)
+            (grad,) = torch.autograd.grad(energy.sum(), a)
+        return energy.detach(), grad
+
+    return run_chain(grad_fn, a0, steps=steps, step_size=step_size, noise=noise,
+                     low=low, high=high)
