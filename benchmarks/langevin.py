@@ -100,6 +100,82 @@ def bench_chain(batch: int = 256, repeats: int = 9, threads: list[int] | None = 
     return rows
 
 
+def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
+    """ms per LAC gradient step: RLlib's Learner.update (one call per step, and one call for
+    ``steps`` minibatches as LAC's training_step does) vs the same losses in a plain torch loop."""
+    import gymnasium as gym
+    import numpy as np
+    from ray.rllib.core import DEFAULT_MODULE_ID
+    from ray.rllib.core.columns import Columns
+    from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
+
+    from lac_rllib.config import LACConfig
+    from lac_rllib.connectors import COSTS
+    from lac_rllib.learner import critic_targets
+    from lac_rllib.networks import gaussian_kl, gaussian_log_prob
+    from lac_rllib import module as M
+
+    obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
+    act_space = gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32)
+    config = LACConfig().training(cost_limit=25.0)
+    learner = config.build_learner(spaces={DEFAULT_MODULE_ID: (obs_space, act_space)})
+    rng = np.random.default_rng(0)
+    n = 256 * steps
+    cols = {Columns.OBS: rng.normal(size=(n, obs_dim)).astype(np.float32),
+            Columns.NEXT_OBS: rng.normal(size=(n, obs_dim)).astype(np.float32),
+            Columns.ACTIONS: rng.uniform(-1, 1, size=(n, act_dim)).astype(np.float32),
+            Columns.REWARDS: rng.normal(size=n).astype(np.float32), COSTS: rng.integers(0, 2, n).astype(np.float32),
+            Columns.TERMINATEDS: np.zeros(n, bool), Columns.TRUNCATEDS: np.zeros(n, bool)}
+
+    def rllib(k):
+        batch = MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch({c: v[: 256 * k] for c, v in cols.items()})}, 256 * k)
+        learner.update(batch=batch, minibatch_size=256, num_total_minibatches=k, timesteps={})
+
+    module = config.get_rl_module_spec(spaces={DEFAULT_MODULE_ID: (obs_space, act_space)}).build()
+    module.make_target_networks()
+    critic_opt = torch.optim.Adam(module.critics.parameters(), lr=config.critic_lr)
+    actor_opt = torch.optim.Adam(module.actor.parameters(), lr=config.actor_lr)
+    tensors = {c: torch.as_tensor(v) for c, v in cols.items()}
+
+    def plain(k):
+        for i in range(k):
+            b = {c: v[256 * i: 256 * (i + 1)] for c, v in tensors.items()}
+            out = module._forward_train(b)
+            y_r, y_c = critic_targets(b, out[M.Q_TARGET_NEXT], 2, config)
+            q = out[M.Q_PRED]
+            critic_loss = ((q[:2] - y_r) ** 2).mean(-1).sum() + ((q[2:] - y_c) ** 2).mean(-1).sum()
+            actor_loss = -gaussian_log_prob(out[M.ACTOR_TARGET_ACTION], out[M.ACTOR_MEAN], out[M.ACTOR_LOG_STD]).mean() \
+                + config.beta * gaussian_kl(out[M.ACTOR_MEAN], out[M.ACTOR_LOG_STD], out[M.TARGET_MEAN], out[M.TARGET_LOG_STD]).mean()
+            critic_opt.zero_grad(), actor_opt.zero_grad()
+            (critic_loss + actor_loss).backward()
+            torch.nn.utils.clip_grad_norm_(module.actor.parameters(), config.actor_grad_clip)
+            critic_opt.step(), actor_opt.step()
+            with torch.no_grad():
+                for main_net, target in module.get_target_network_pairs():
+                    for p, tp in zip(main_net.parameters(), target.parameters()):
+                        tp.mul_(1 - config.polyak_tau).add_(p, alpha=config.polyak_tau)
+
+    times = _interleaved_median_ms({"plain": lambda: plain(steps), "rllib_batched": lambda: rllib(steps),
+                                    "rllib_one_per_call": lambda: rllib(1)}, repeats=3, warmup=1)
+    return {"plain": times["plain"] / steps, "rllib_batched": times["rllib_batched"] / steps,
+            "rllib_one_per_call": times["rllib_one_per_call"]}
+
+
+def bench_gradient_step(steps: int = 8, threads: int = 1) -> list[dict]:
+    torch.set_num_threads(threads)
+    print(f"\nLAC gradient step (batch 256, T = 30, default networks, {threads} thread): ms per step")
+    print(f"{'task':<11} {'obs/act':>8} {'plain torch':>12} {'RLlib, 1 call':>14} {'ratio':>7} "
+          f"{'RLlib, 1 step/call':>19} {'ratio':>7}")
+    rows = []
+    for task, (obs_dim, act_dim) in TASK_DIMS.items():
+        r = _gradient_step_case(obs_dim, act_dim, steps)
+        rows.append({"task": task, **r})
+        print(f"{task:<11} {f'{obs_dim}/{act_dim}':>8} {r['plain']:>12.1f} {r['rllib_batched']:>14.1f} "
+              f"{r['rllib_batched'] / r['plain']:>6.2f}x {r['rllib_one_per_call']:>19.1f} "
+              f"{r['rllib_one_per_call'] / r['plain']:>6.2f}x", flush=True)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=lambda s: [int(x) for x in s.split(",")], default=None,
@@ -110,6 +186,7 @@ def main() -> None:
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} "
           "(multi-thread timings collapse when other work holds the cores)")
     bench_chain(repeats=args.repeats, threads=args.threads)
+    bench_gradient_step()
 
 
 if __name__ == "__main__":
