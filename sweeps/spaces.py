@@ -40,8 +40,10 @@ BUDGETS: dict[str, Budget] = {
     "smoke": Budget(2_000, {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
                             "actor_hidden": (32, 32), "critic_hidden": (32, 32)},
                     "seconds per trial: proves the machinery, learns nothing"),
-    "quick": Budget(6_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 6_000, "random_iterations": 1,
-                            "gradient_passes": 0.5},
+    # 64-wide networks: with the paper's 256-wide critics one T = 500 chain costs ~8 s per
+    # gradient step here (benchmarks/langevin.py), which no 30-minute ablation can afford.
+    "quick": Budget(10_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
+                             "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64)},
                     "sized so the default ablation (48 trials) takes ~30-45 min on 2 cores"),
     "paper": Budget(2_500_000, {}, "the paper's 2.5M env steps with the SPEC presets"),
 }
