@@ -2,16 +2,14 @@
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # repo root: `sweeps` is not installed
 
-from sweeps import report  # noqa: E402
+from sweeps import report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NAN = math.nan
