@@ -173,10 +173,10 @@ def check_field(name: str, value: Any) -> None:
         bad("a number in (0, 1]")
     if name == "polyak_tau" and not (real(value) and 0 < value <= 1):
         bad("a number in (0, 1]")
-    if name in ("langevin_grad_clip", "actor_grad_clip", "cost_limit") and value is not None and not (
-        real(value) and value > 0 or (name == "cost_limit" and real(value) and value >= 0)
-    ):
-        bad("None or a finite number > 0" if name != "cost_limit" else "None or a number >= 0")
+    if name in ("langevin_grad_clip", "actor_grad_clip") and value is not None and not (real(value) and value > 0):
+        bad("None or a finite number > 0")
+    if name == "cost_limit" and value is not None and not (real(value) and value >= 0):
+        bad("None or a finite number >= 0")
     if name == "langevin_start" and value not in START_MODES:
         bad(" | ".join(START_MODES))
     if name == "actor_chain_at" and value not in CHAIN_AT:
