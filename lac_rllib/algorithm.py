@@ -35,6 +35,8 @@ from lac_rllib.tasks import get_task
 EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU = (
     "episode_return", "episode_cost", "cost_limit", "feasible", "nu")
 EPISODES_THIS_ITER, ENV_STEPS = "episodes_this_iter", "env_steps"
+#: Version of the LAC keys in a checkpoint's rllib_checkpoint.json (see LAC.get_metadata).
+CHECKPOINT_FORMAT = 1
 
 
 def make_task_env(env_config, task_id: str):
@@ -50,6 +52,25 @@ class LAC(Algorithm):
     @classmethod
     def get_default_config(cls) -> LACConfig:
         return LACConfig(cls)
+
+    def get_metadata(self) -> dict:
+        """RLlib writes this into the checkpoint's ``rllib_checkpoint.json``; the evaluation
+        CLI (lac_rllib.evaluation) checks the version/format and reads the task and config."""
+        import importlib.metadata
+        import json
+
+        cfg = self.config
+        lac = {
+            "lac_rllib_version": importlib.metadata.version("lac-rllib"),
+            "checkpoint_format": CHECKPOINT_FORMAT,
+            "task_id": cfg.task_id,
+            "seed": cfg.seed,
+            "cost_limit": cfg.effective_cost_limit,
+            "episode_cost_discount": cfg.effective_episode_cost_discount,
+            "lac_config": cfg.lac_params(),
+        }
+        # JSON-safe (tuples -> lists, anything exotic -> str).
+        return {**super().get_metadata(), **json.loads(json.dumps(lac, default=str))}
 
     def setup(self, config) -> None:
         if config.task_id:

@@ -56,6 +56,9 @@ lac-rllib entries back in gymnasium's registry.
 
 Gymnasium's own MuJoCo envs are not affected (tested: seeded ``Ant-v5`` trajectories are
 bit-identical with and without :func:`apply`).
+5. **Offscreen rendering** (``TypeError`` in ``render``): gymnasium 1.x's ``OffScreenViewer``
+   requires width/height that safety-gymnasium does not pass; they default to the model's
+   offscreen buffer size (videos in ``sweeps/evaluate.py --video``).
 """
 
 from __future__ import annotations
@@ -277,6 +280,26 @@ def _patch_car_joint_ids() -> None:
 # --------------------------------------------------------------------------- registry
 
 
+def _patch_offscreen_viewer() -> None:
+    """Fix 5: safety-gymnasium builds gymnasium's ``OffScreenViewer(model, data)``; gymnasium 1.x
+    requires width and height, so offscreen rendering (videos) raised. Default them to the
+    model's offscreen buffer size."""
+    import safety_gymnasium.bases.underlying as underlying
+    from gymnasium.envs.mujoco.mujoco_rendering import OffScreenViewer
+
+    if getattr(underlying.OffScreenViewer, "_lac_rllib_patched", False):
+        return
+
+    class SizedOffScreenViewer(OffScreenViewer):
+        _lac_rllib_patched = True
+
+        def __init__(self, model, data, width=None, height=None, **kwargs):  # noqa: ANN001
+            super().__init__(model, data, width or model.vis.global_.offwidth,
+                             height or model.vis.global_.offheight, **kwargs)
+
+    underlying.OffScreenViewer = SizedOffScreenViewer
+
+
 def _is_lac_spec(spec: EnvSpec | None) -> bool:
     from lac_rllib.tasks import registry
 
@@ -351,6 +374,7 @@ def apply() -> types.ModuleType:
                 importlib.import_module(name)
         _patch_registration()
         _patch_car_joint_ids()
+        _patch_offscreen_viewer()
         _reclaim_gym_ids()
         _STATE["module"] = sg
         return sg

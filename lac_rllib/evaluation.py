@@ -1,0 +1,493 @@
+"""Evaluate a trained LAC checkpoint: restore the policy without Ray, run seeded episodes.
+
+``restore_policy(path)`` reads an RLlib checkpoint written by ``LAC.save_to_path`` (what
+``lac-train`` leaves in ``<output>/checkpoint``) with RLlib's own ``Checkpointable`` API, in
+this process, without ``ray.init``:
+
+* the FULL ``LACTorchRLModule`` (actor, critics, target actor and critics, ν) from the
+  learner's copy ``learner_group/learner/rl_module/default_policy`` via
+  ``RLModule.from_checkpoint``. The env runners' copy is inference-only (no critics), and the
+  Langevin chain needs the critics, the target actor and ν;
+* the env-to-module connector pipeline the env runner acted with, via
+  ``EnvToModulePipeline.from_checkpoint(env_runner/env_to_module_connector)``; its
+  ``MeanStdFilter`` (running mean/std + clip, SPEC §5) is swapped for a frozen twin
+  (``update_stats=False``) holding the same state, so evaluation never moves the statistics;
+* the task id and the LAC config fields from the checkpoint's ``rllib_checkpoint.json``,
+  which ``LAC.get_metadata`` fills (``checkpoint_format`` 1). The lac-rllib major.minor
+  version and the format must match the installed ones.
+
+``evaluate(policy, episodes, seed, actions=...)`` runs ``episodes`` episodes, episode ``i``
+reset with seed ``seed + i``, fully deterministic for equal seeds:
+
+* ``actions="generator"``: the actor's mean μ_φ(s) (what RLlib's inference acts with);
+* ``actions="langevin"``: Algorithm 1 (SPEC §1) at each visited state, started from the TARGET
+  actor π_φ'(·|s), with the online critics and the checkpoint's ν, noise from a
+  ``torch.Generator`` seeded with ``seed + i``; it also reports the mean energy of the chain's
+  start ã₀ ~ π_φ' (the generator's proposal) against the refined action ã_T.
+
+Actions are clipped to the action bounds before ``env.step`` (as RLlib's ``clip_actions``
+does in training). The episode cost follows the task's convention (sum, or discounted with
+``episode_cost_discount``), as in training.
+
+Every failure to restore raises :class:`CheckpointError` with a one-line message.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.metadata
+import json
+import math
+import os
+import sys
+from typing import Any
+
+import numpy as np
+import torch
+
+#: The ``checkpoint_format`` this module reads (written by ``LAC.get_metadata``).
+SUPPORTED_CHECKPOINT_FORMAT = 1
+ACTION_MODES = ("generator", "langevin")
+#: The RLlib algorithm checkpoint's metadata file (``Algorithm.METADATA_FILE_NAME``).
+ALGO_METADATA_FILE = "rllib_checkpoint.json"
+#: Frames rendered per episode video at most (longer episodes are subsampled).
+MAX_VIDEO_FRAMES = 200
+
+
+class CheckpointError(Exception):
+    """A checkpoint cannot be restored; the message names the problem in one line."""
+
+
+@dataclasses.dataclass
+class Policy:
+    """A restored LAC policy: everything ``evaluate`` needs, no Ray."""
+
+    module: Any                   # LACTorchRLModule, full (critics, targets, ν), eval mode
+    env_to_module: Any            # EnvToModulePipeline (its MeanStdFilter frozen)
+    obs_filter: Any               # the frozen MeanStdFilter, or None (obs_normalization off)
+    task_id: str
+    lac_config: dict              # LACParams fields as saved
+    cost_limit: float             # b in force for the run
+    episode_cost_discount: float  # 1.0 = summed episode cost, < 1 = discounted
+    env_config: dict
+    checkpoint_path: str
+    metadata: dict                # the whole rllib_checkpoint.json
+
+    @property
+    def action_low(self) -> np.ndarray:
+        return np.asarray(self.module.action_space.low, dtype=np.float32)
+
+    @property
+    def action_high(self) -> np.ndarray:
+        return np.asarray(self.module.action_space.high, dtype=np.float32)
+
+    def preprocess(self, raw_obs: np.ndarray) -> torch.Tensor:
+        """(B, obs_dim) raw env observations → (B, obs_dim) module input (filter applied, frozen)."""
+        from ray.rllib.core.columns import Columns
+        from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+
+        space = self.env_to_module.input_observation_space
+        episodes = [SingleAgentEpisode(observations=[np.asarray(o, dtype=np.float32)],
+                                       observation_space=space,
+                                       action_space=self.env_to_module.input_action_space)
+                    for o in np.atleast_2d(raw_obs)]
+        batch = self.env_to_module(episodes=episodes, rl_module=self.module, explore=False,
+                                   shared_data={})
+        return batch[Columns.OBS]
+
+
+# ----------------------------------------------------------------------------- restore
+
+
+def _installed_version() -> str:
+    return importlib.metadata.version("lac-rllib")
+
+
+def _major_minor(version: str) -> tuple[str, ...]:
+    return tuple(str(version).split(".")[:2])
+
+
+def find_checkpoint_dir(path: str) -> str:
+    """The algorithm checkpoint directory: ``path`` itself or ``path/checkpoint`` (a
+    ``lac-train --output`` directory)."""
+    path = os.path.abspath(os.path.expanduser(str(path)))
+    if not os.path.exists(path):
+        raise CheckpointError(f"checkpoint not found: {path} does not exist")
+    if not os.path.isdir(path):
+        raise CheckpointError(f"not a checkpoint: {path} is not a directory")
+    for candidate in (path, os.path.join(path, "checkpoint")):
+        if os.path.isfile(os.path.join(candidate, ALGO_METADATA_FILE)):
+            return candidate
+    raise CheckpointError(
+        f"not an RLlib checkpoint: {path} has no {ALGO_METADATA_FILE} (nor checkpoint/{ALGO_METADATA_FILE})")
+
+
+def read_metadata(checkpoint_dir: str) -> dict:
+    """Read and check the LAC keys of ``rllib_checkpoint.json`` (version, format, task)."""
+    file = os.path.join(checkpoint_dir, ALGO_METADATA_FILE)
+    try:
+        with open(file, encoding="utf-8") as f:
+            meta = json.load(f)
+        if not isinstance(meta, dict):
+            raise ValueError(f"top level is {type(meta).__name__}, not an object")
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise CheckpointError(f"corrupt checkpoint: metadata {file} is unreadable ({one_line(e)})") from None
+    if "lac_rllib_version" not in meta or "checkpoint_format" not in meta:
+        raise CheckpointError(
+            f"not a lac-rllib checkpoint: {file} has no lac_rllib_version/checkpoint_format "
+            "(written by another algorithm, or by lac-rllib before checkpoint format 1)")
+    fmt, saved, installed = meta["checkpoint_format"], str(meta["lac_rllib_version"]), _installed_version()
+    if fmt != SUPPORTED_CHECKPOINT_FORMAT:
+        raise CheckpointError(
+            f"unsupported checkpoint format {fmt!r} in {file}: this lac-rllib {installed} reads "
+            f"format {SUPPORTED_CHECKPOINT_FORMAT}")
+    if _major_minor(saved) != _major_minor(installed):
+        raise CheckpointError(
+            f"checkpoint version mismatch: written by lac-rllib {saved}, installed lac-rllib is "
+            f"{installed} (major.minor must match; evaluate it with lac-rllib "
+            f"{'.'.join(_major_minor(saved))}.x)")
+    for key in ("task_id", "lac_config", "cost_limit", "episode_cost_discount"):
+        if key not in meta:
+            raise CheckpointError(f"corrupt checkpoint: {file} lacks the {key!r} entry")
+    return meta
+
+
+def _restore_module(module_dir: str):
+    """The learner's full RLModule, every parameter and buffer restored (or CheckpointError)."""
+    from ray.rllib.core.rl_module.apis import TargetNetworkAPI
+    from ray.rllib.core.rl_module.rl_module import RLModule
+
+    if not os.path.isdir(module_dir):
+        raise CheckpointError(f"corrupt checkpoint: module directory {module_dir} is missing")
+    try:
+        module = RLModule.from_checkpoint(module_dir)
+        if module.inference_only:
+            raise CheckpointError(f"corrupt checkpoint: {module_dir} holds an inference-only module "
+                                  "(no critics); the learner's full module is required")
+        # Target networks are created by the Learner, not by the module's setup(); RLlib's
+        # TorchRLModule.set_state loads non-strictly and would silently skip π_φ' and Q'.
+        # So create them, poison every tensor with NaN and restore again: any tensor the
+        # checkpoint does not cover stays NaN and is reported below.
+        if isinstance(module, TargetNetworkAPI):
+            module.make_target_networks()
+        with torch.no_grad():
+            for t in list(module.parameters()) + list(module.buffers()):
+                t.fill_(float("nan"))
+        module.restore_from_path(module_dir)
+    except CheckpointError:
+        raise
+    except Exception as e:  # noqa: BLE001 (unpickling/IO errors of every kind)
+        raise CheckpointError(f"corrupt checkpoint: cannot restore the RLModule from {module_dir} "
+                              f"({one_line(e)})") from None
+    tensors = list(module.named_parameters()) + list(module.named_buffers())
+    bad = [name for name, t in tensors if not torch.isfinite(t).all()]
+    if bad:
+        raise CheckpointError(
+            f"corrupt checkpoint: module state in {module_dir} is missing or non-finite for "
+            f"{len(bad)} tensor(s), e.g. {', '.join(bad[:3])}")
+    module.eval()
+    return module
+
+
+def _restore_env_to_module(pipeline_dir: str):
+    """The env runner's env-to-module pipeline with a frozen copy of its MeanStdFilter."""
+    from ray.rllib.connectors.env_to_module.env_to_module_pipeline import EnvToModulePipeline
+    from ray.rllib.connectors.env_to_module.mean_std_filter import MeanStdFilter
+
+    if not os.path.isdir(pipeline_dir):
+        raise CheckpointError(f"corrupt checkpoint: observation-filter directory {pipeline_dir} is missing")
+    try:
+        pipeline = EnvToModulePipeline.from_checkpoint(pipeline_dir)
+        filters = pipeline[MeanStdFilter]
+        if len(filters) > 1:
+            raise CheckpointError(f"unexpected checkpoint: {len(filters)} MeanStdFilters in {pipeline_dir}")
+        frozen = None
+        if filters:
+            trained = filters[0]
+            _, ctor_kwargs = trained.get_ctor_args_and_kwargs()
+            frozen = MeanStdFilter(**{**ctor_kwargs, "update_stats": False})
+            # insert_after sets the frozen filter's spaces; remove() drops the first
+            # MeanStdFilter, i.e. the trained one.
+            pipeline.insert_after(MeanStdFilter, frozen)
+            frozen.set_state(trained.get_state())
+            pipeline.remove(MeanStdFilter)
+    except CheckpointError:
+        raise
+    except Exception as e:  # noqa: BLE001
+        raise CheckpointError(f"corrupt checkpoint: cannot restore the observation filter from "
+                              f"{pipeline_dir} ({one_line(e)})") from None
+    return pipeline, frozen
+
+
+def restore_policy(checkpoint_path: str) -> Policy:
+    """Restore the LAC policy of an RLlib checkpoint (see the module docstring). No Ray."""
+    from ray.rllib.core import (
+        COMPONENT_ENV_RUNNER,
+        COMPONENT_ENV_TO_MODULE_CONNECTOR,
+        COMPONENT_LEARNER,
+        COMPONENT_LEARNER_GROUP,
+        COMPONENT_RL_MODULE,
+        DEFAULT_MODULE_ID,
+    )
+
+    from lac_rllib.tasks import get_task
+
+    ckpt = find_checkpoint_dir(checkpoint_path)
+    meta = read_metadata(ckpt)
+    try:
+        get_task(meta["task_id"])
+    except ValueError as e:
+        raise CheckpointError(f"checkpoint task is not available here: {one_line(e)}") from None
+    module = _restore_module(os.path.join(
+        ckpt, COMPONENT_LEARNER_GROUP, COMPONENT_LEARNER, COMPONENT_RL_MODULE, DEFAULT_MODULE_ID))
+    pipeline, obs_filter = _restore_env_to_module(
+        os.path.join(ckpt, COMPONENT_ENV_RUNNER, COMPONENT_ENV_TO_MODULE_CONNECTOR))
+    if meta["lac_config"].get("obs_normalization", True) and obs_filter is None:
+        raise CheckpointError(f"corrupt checkpoint: obs_normalization is on but {ckpt} holds no MeanStdFilter state")
+    return Policy(
+        module=module, env_to_module=pipeline, obs_filter=obs_filter, task_id=meta["task_id"],
+        lac_config=dict(meta["lac_config"]), cost_limit=float(meta["cost_limit"]),
+        episode_cost_discount=float(meta["episode_cost_discount"]),
+        env_config=dict(meta.get("env_config") or {}), checkpoint_path=ckpt, metadata=meta,
+    )
+
+
+def one_line(e: BaseException | str) -> str:
+    text = " ".join(str(e).split())
+    if isinstance(e, BaseException):
+        text = f"{type(e).__name__}: {text}" if text else type(e).__name__
+    return text[:300]
+
+
+# ----------------------------------------------------------------------------- evaluate
+
+
+class _Progress:
+    """tqdm when installed, else a plain counter on stderr."""
+
+    def __init__(self, total: int, desc: str, enabled: bool):
+        self._bar, self._n, self._total, self._desc, self._enabled = None, 0, total, desc, enabled
+        if not enabled:
+            return
+        try:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, desc=desc, unit="ep", file=sys.stderr, dynamic_ncols=True)
+        except ImportError:
+            pass
+
+    def update(self, **postfix) -> None:
+        self._n += 1
+        if self._bar is not None:
+            self._bar.set_postfix(postfix, refresh=False)
+            self._bar.update(1)
+        elif self._enabled:
+            info = "  ".join(f"{k} {v}" for k, v in postfix.items())
+            print(f"\r{self._desc}: {self._n}/{self._total}  {info}", end="", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+        elif self._enabled:
+            print(file=sys.stderr, flush=True)
+
+
+def _notice(msg: str) -> None:
+    print(f"evaluate: notice: {msg}", file=sys.stderr, flush=True)
+
+
+def _video_env(policy: Policy):
+    """(env with rgb_array rendering, None) or (None, reason it cannot render here)."""
+    from lac_rllib.tasks import get_task
+
+    spec = get_task(policy.task_id)
+    probe = spec.make(dict(policy.env_config))
+    modes = (getattr(probe, "metadata", None) or {}).get("render_modes", [])
+    probe.close()
+    if "rgb_array" not in modes:
+        return None, f"task {policy.task_id} has no renderer (render modes: {list(modes) or 'none'}); continuing without video"
+    # MuJoCo picks its GL backend when first imported: headless EGL unless the user chose.
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):
+        os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+    try:
+        env = spec.make({**policy.env_config, "render_mode": "rgb_array"})
+        env.reset(seed=0)
+        frame = env.render()
+        if not isinstance(frame, np.ndarray) or frame.ndim != 3:
+            raise RuntimeError(f"render() returned {type(frame).__name__}")
+    except Exception as e:  # noqa: BLE001 (every GL failure mode)
+        return None, (f"cannot render {policy.task_id} offscreen here (MUJOCO_GL="
+                      f"{os.environ.get('MUJOCO_GL')}: {one_line(e)[:160]}); continuing without video")
+    return env, None
+
+
+class _Recorder:
+    """Captures every ``stride``-th frame, at most ~MAX_VIDEO_FRAMES per episode, ≤ ~320 px.
+
+    The stride comes from the env's time limit; without one, when 2·MAX_VIDEO_FRAMES frames
+    are held every other one is dropped and the stride doubles. Offscreen rendering is the
+    expensive part (software EGL renders ~0.2 s per 480² frame), hence the budget.
+    """
+
+    def __init__(self, env):
+        limit = _episode_limit(env)
+        self.env, self.frames = env, []
+        self.stride = max(1, math.ceil(limit / MAX_VIDEO_FRAMES)) if limit else 1
+
+    def capture(self, t: int, force: bool = False) -> None:
+        if t % self.stride and not force:
+            return
+        frame = np.asarray(self.env.render())
+        step = max(1, math.ceil(max(frame.shape[:2]) / 320))
+        self.frames.append(np.ascontiguousarray(frame[::step, ::step]))
+        if len(self.frames) >= 2 * MAX_VIDEO_FRAMES:
+            self.frames, self.stride = self.frames[::2], self.stride * 2
+
+
+def _episode_limit(env) -> int | None:
+    """The TimeLimit of an env (walking its wrappers), or None."""
+    e = env
+    while e is not None:
+        n = getattr(e, "_max_episode_steps", None)
+        if isinstance(n, int) and n > 0:
+            return n
+        e = getattr(e, "env", None)
+    return getattr(getattr(env, "spec", None), "max_episode_steps", None)
+
+
+def _write_video(frames: list[np.ndarray], path_stem: str, fps: float) -> str:
+    """mp4 when an ffmpeg plugin is installed (imageio-ffmpeg or av), else gif."""
+    import imageio.v2 as imageio
+
+    for module, ext in (("imageio_ffmpeg", ".mp4"), ("av", ".mp4")):
+        try:
+            __import__(module)
+        except ImportError:
+            continue
+        path = path_stem + ext
+        imageio.mimwrite(path, frames, fps=fps, macro_block_size=1)
+        return path
+    path = path_stem + ".gif"
+    imageio.mimwrite(path, frames, duration=1000.0 / fps, loop=0)
+    return path
+
+
+def _stats(values: list[float]) -> tuple[float, float]:
+    if not values:
+        return float("nan"), float("nan")
+    arr = np.asarray(values, dtype=np.float64)
+    return float(arr.mean()), float(arr.std())
+
+
+def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator",
+             langevin_steps: int | None = None, langevin_step_size: float | None = None,
+             video_dir: str | None = None, progress: bool = True) -> dict:
+    """Run ``episodes`` episodes (episode i reset with ``seed + i``) and summarise them.
+
+    Returns per-episode ``returns``/``costs``/``lengths``, ``return_mean``/``return_std``,
+    ``cost_mean``/``cost_std`` (std over episodes, ddof 0), ``cost_limit``,
+    ``within_limit_fraction`` (episodes with cost ≤ b), and for ``actions="langevin"``
+    ``energy_generator_mean`` (E at the chain start ã₀ ~ π_φ'), ``energy_refined_mean``
+    (E at ã_T) and ``action_displacement_mean`` over all visited states.
+    """
+    from ray.rllib.core.columns import Columns
+    from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+
+    from lac_rllib.connectors import step_cost
+    from lac_rllib.tasks import get_task
+
+    if actions not in ACTION_MODES:
+        raise ValueError(f"actions={actions!r} is invalid; accepted: {' | '.join(ACTION_MODES)}")
+    if not (isinstance(episodes, int) and episodes >= 1):
+        raise ValueError(f"episodes={episodes!r} is invalid; accepted: an integer >= 1")
+    if langevin_steps is not None and not (isinstance(langevin_steps, int) and langevin_steps >= 1):
+        raise ValueError(f"langevin_steps={langevin_steps!r} is invalid; accepted: an integer >= 1")
+    if langevin_step_size is not None and not (math.isfinite(langevin_step_size) and langevin_step_size > 0):
+        raise ValueError(f"langevin_step_size={langevin_step_size!r} is invalid; accepted: a number > 0")
+    steps = langevin_steps or int(policy.lac_config["langevin_steps"])
+    step_size = langevin_step_size or float(policy.lac_config["langevin_step_size"])
+
+    module, gamma_c = policy.module, policy.episode_cost_discount
+    low, high = policy.action_low, policy.action_high
+    env, video_notice, videos = None, None, []
+    if video_dir is not None:
+        env, video_notice = _video_env(policy)
+        if video_notice:
+            _notice(video_notice)
+        else:
+            os.makedirs(video_dir, exist_ok=True)
+    if env is None:
+        env = get_task(policy.task_id).make(dict(policy.env_config))
+    fps = float((env.metadata or {}).get("render_fps") or 30)
+
+    returns, costs, lengths = [], [], []
+    e_start, e_end, displacement = [], [], []
+    bar = _Progress(episodes, f"eval {actions}", progress)
+    try:
+        for i in range(episodes):
+            obs, info = env.reset(seed=seed + i)
+            generator = torch.Generator().manual_seed(seed + i) if actions == "langevin" else None
+            episode = SingleAgentEpisode(observations=[obs], infos=[info],
+                                         observation_space=policy.env_to_module.input_observation_space,
+                                         action_space=policy.env_to_module.input_action_space)
+            recorder = _Recorder(env) if video_notice is None and video_dir is not None else None
+            ret, cost, t, done = 0.0, 0.0, 0, False
+            while not done:
+                if recorder is not None:
+                    recorder.capture(t)
+                batch = policy.env_to_module(episodes=[episode], rl_module=module, explore=False,
+                                             shared_data={})
+                s = batch[Columns.OBS]
+                with torch.no_grad():
+                    if actions == "generator":
+                        action = module.actor(s)[0]
+                    else:
+                        t_mean, t_log_std = module.target_actor(s)
+                        chain = module.langevin(s, t_mean, t_log_std, steps=steps,
+                                                step_size=step_size, generator=generator)
+                        action = chain.action
+                        e_start.append(float(chain.energy_start[0]))
+                        e_end.append(float(chain.energy_end[0]))
+                        displacement.append(float(chain.displacement[0]))
+                action = np.clip(action[0].numpy().astype(np.float32), low, high)
+                obs, reward, terminated, truncated, info = env.step(action)
+                ret += float(reward)
+                cost += gamma_c**t * step_cost(info)  # the task's convention, as in training
+                t += 1
+                done = bool(terminated or truncated)
+                episode.add_env_step(obs, action, float(reward), infos=info,
+                                     terminated=bool(terminated), truncated=bool(truncated))
+            returns.append(ret)
+            costs.append(cost)
+            lengths.append(t)
+            if recorder is not None:
+                recorder.capture(t, force=True)
+                videos.append(_write_video(recorder.frames, os.path.join(
+                    video_dir, f"episode_{i:03d}_seed_{seed + i}_{actions}"), fps / recorder.stride))
+            bar.update(ret=f"{ret:.3g}", cost=f"{cost:.3g}")
+    finally:
+        bar.close()
+        env.close()
+
+    limit = policy.cost_limit
+    ret_mean, ret_std = _stats(returns)
+    cost_mean, cost_std = _stats(costs)
+    result = {
+        "checkpoint": policy.checkpoint_path, "task": policy.task_id, "actions": actions,
+        "episodes": episodes, "seed": seed,
+        "returns": returns, "costs": costs, "lengths": lengths,
+        "return_mean": ret_mean, "return_std": ret_std, "cost_mean": cost_mean, "cost_std": cost_std,
+        "cost_limit": limit, "episode_cost_discount": gamma_c,
+        "within_limit_fraction": float(np.mean([c <= limit for c in costs])),
+        "videos": videos, "video_notice": video_notice,
+    }
+    if actions == "langevin":
+        result.update({
+            "langevin_steps": steps, "langevin_step_size": step_size,
+            "nu": float(module.nu),
+            "energy_generator_mean": float(np.mean(e_start)),
+            "energy_refined_mean": float(np.mean(e_end)),
+            "action_displacement_mean": float(np.mean(displacement)),
+        })
+    return result
