@@ -27,6 +27,7 @@ lac-rllib version) or an MLflow run without a checkpoint; each error is one line
 from __future__ import annotations
 
 import argparse
+import os
 import dataclasses
 import json
 import math
@@ -251,6 +252,9 @@ def main(argv: list[str] | None = None) -> int:
     import logging
 
     import torch
+
+    # MLflow's own download bar floods logs with carriage returns; ours is enough.
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
 
     torch.set_num_threads(1)
     # RLlib's own RLModule constructor logs a deprecation warning about RLModuleConfig.
