@@ -1,10 +1,17 @@
-"""Environment speed.
+"""Environment speed: raw env steps/s, and steps/s through LAC's sampling path.
 
-Part 1 (here): raw steps/s per task: random actions, one process, reset on episode end (reset
-time included, as it is in training). Part 2, through LAC's sampling path, is added later.
+Part 1, ``bench_raw``: raw steps/s per task: random actions, one process, reset on episode end
+(reset time included, as it is in training).
 
-    python benchmarks/envs.py                     # every registered task, 3000 steps each
-    python benchmarks/envs.py --steps 5000 SafetyPointGoal1-v0 focops/AntVelocity-v0
+Part 2, ``bench_sampling``: the same raw measurement, then steps/s of an LAC algorithm's local
+env runner (``num_env_runners=0``, one process): RLlib's vector env and episodes, the env-to-module
+connectors (MeanStdFilter on, as by default), the generator actor of the task's preset acting
+(exploration sampling), the episode-cost callback, the module-to-env connectors (action
+clipping). No learning. Both in the same run, with their ratio.
+
+    python benchmarks/envs.py                       # raw + sampling, every task but CostProbe
+    python benchmarks/envs.py --steps 5000 --tasks SafetyPointGoal1-v0 focops/AntVelocity-v0
+    python benchmarks/envs.py --raw-only            # part 1 only (no Ray)
 """
 
 from __future__ import annotations
@@ -25,38 +32,102 @@ def bench_raw(task_ids: list[str] | None = None, steps: int = 3000, seed: int = 
     truncation) are. Each row: task, steps, episodes (completed), seconds, steps_per_s,
     mean_episode_len (completed episodes; None if none completed), cost_per_step.
     """
-    rows = []
-    for task_id in task_ids or known_tasks():
-        env = get_task(task_id).make()
-        env.action_space.seed(seed)
-        env.reset(seed=seed)
-        actions = [env.action_space.sample() for _ in range(steps)]
-        episodes, ep_len, lens, cost = 0, 0, [], 0.0
-        t0 = time.perf_counter()
-        for action in actions:
-            _, _, term, trunc, info = env.step(action)
-            cost += info["cost"]
-            ep_len += 1
-            if term or trunc:
-                episodes += 1
-                lens.append(ep_len)
-                ep_len = 0
-                env.reset()
-        seconds = time.perf_counter() - t0
-        env.close()
-        rows.append(
-            {
-                "task": task_id,
-                "steps": steps,
-                "episodes": episodes,
-                "seconds": seconds,
-                "steps_per_s": steps / seconds,
-                "mean_episode_len": float(np.mean(lens)) if lens else None,
-                "cost_per_step": cost / steps,
-            }
-        )
+    rows = [_raw_row(task_id, steps, seed) for task_id in task_ids or known_tasks()]
     _print_table(rows)
     return rows
+
+
+def _raw_row(task_id: str, steps: int, seed: int) -> dict:
+    env = get_task(task_id).make()
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    episodes, ep_len, lens, cost = 0, 0, [], 0.0
+    t0 = time.perf_counter()
+    for action in actions:
+        _, _, term, trunc, info = env.step(action)
+        cost += info["cost"]
+        ep_len += 1
+        if term or trunc:
+            episodes += 1
+            lens.append(ep_len)
+            ep_len = 0
+            env.reset()
+    seconds = time.perf_counter() - t0
+    env.close()
+    return {
+        "task": task_id,
+        "steps": steps,
+        "episodes": episodes,
+        "seconds": seconds,
+        "steps_per_s": steps / seconds,
+        "mean_episode_len": float(np.mean(lens)) if lens else None,
+        "cost_per_step": cost / steps,
+    }
+
+
+def sampling_tasks() -> list[str]:
+    """Every registered task except the diagnostic ``lac/CostProbe-v0``."""
+    return [t for t in known_tasks() if t != "lac/CostProbe-v0"]
+
+
+def bench_sampling(task_ids: list[str] | None = None, steps: int = 3000, seed: int = 0,
+                   warmup: int = 50) -> list[dict]:
+    """Raw steps/s and steps/s through LAC's sampling path, per task, in one run.
+
+    Sampling path: ``LACConfig().task(id)`` (the task's preset: default network sizes,
+    observation filter on), ``num_env_runners=0``, ``algo.env_runner.sample(num_timesteps=steps,
+    explore=True, random_actions=False)`` (the generator acts), no learning. Algorithm build,
+    the first reset and ``warmup`` steps (connector/module warm-up) are not timed; later resets
+    are, as in :func:`bench_raw`. Torch runs with 1 thread. Starts Ray (1 CPU) if needed.
+    Each row: task, steps, raw_steps_per_s, sampling_steps_per_s, ratio (sampling / raw),
+    sampling_episodes (completed in the timed sample). Prints a table, returns the rows.
+    """
+    import ray
+    import torch
+
+    from lac_rllib.config import LACConfig
+
+    torch.set_num_threads(1)
+    if not ray.is_initialized():
+        ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    rows = []
+    for task_id in task_ids or sampling_tasks():
+        raw = _raw_row(task_id, steps, seed)
+        config = LACConfig().task(task_id).debugging(seed=seed).env_runners(num_env_runners=0)
+        algo = config.build_algo()
+        try:
+            runner = algo.env_runner
+            runner.sample(num_timesteps=warmup, explore=True, random_actions=False)
+            t0 = time.perf_counter()
+            episodes = runner.sample(num_timesteps=steps, explore=True, random_actions=False)
+            seconds = time.perf_counter() - t0
+        finally:
+            algo.stop()
+        sampled = sum(len(e) for e in episodes)
+        assert sampled == steps, f"{task_id}: sampled {sampled} steps, expected {steps}"
+        row = {
+            "task": task_id,
+            "steps": steps,
+            "raw_steps_per_s": raw["steps_per_s"],
+            "sampling_steps_per_s": steps / seconds,
+            "sampling_episodes": sum(e.is_done for e in episodes),
+        }
+        row["ratio"] = row["sampling_steps_per_s"] / row["raw_steps_per_s"]
+        rows.append(row)
+        print(f"  {task_id}: raw {row['raw_steps_per_s']:,.0f} steps/s, sampling "
+              f"{row['sampling_steps_per_s']:,.0f} steps/s", flush=True)
+    _print_sampling_table(rows)
+    return rows
+
+
+def _print_sampling_table(rows: list[dict]) -> None:
+    header = f"{'task':<30} {'raw steps/s':>11} {'sampling steps/s':>16} {'ratio':>6} {'steps':>6}"
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        print(f"{r['task']:<30} {r['raw_steps_per_s']:>11,.0f} {r['sampling_steps_per_s']:>16,.0f} "
+              f"{r['ratio']:>6.2f} {r['steps']:>6}")
 
 
 def _print_table(rows: list[dict]) -> None:
@@ -73,12 +144,22 @@ def _print_table(rows: list[dict]) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("tasks", nargs="*", help="task ids (default: all registered)")
-    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("positional_tasks", nargs="*", metavar="TASK", help="task ids (same as --tasks)")
+    parser.add_argument("--tasks", nargs="+", default=[], metavar="TASK",
+                        help="task ids (default: every registered task but lac/CostProbe-v0; "
+                             "with --raw-only, every registered task)")
+    parser.add_argument("--steps", type=int, default=3000, help="timed steps per task and measurement")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--raw-only", action="store_true", help="only the raw env table (part 1)")
     args = parser.parse_args(argv)
+    tasks = [*args.positional_tasks, *args.tasks] or None
+    for task_id in tasks or []:
+        get_task(task_id)  # unknown id -> ValueError listing the known ones, before any work
     print(runtime_versions())
-    bench_raw(args.tasks or None, args.steps, args.seed)
+    if args.raw_only:
+        bench_raw(tasks, args.steps, args.seed)
+    else:
+        bench_sampling(tasks, args.steps, args.seed)
 
 
 if __name__ == "__main__":
