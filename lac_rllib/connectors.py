@@ -82,6 +82,12 @@ class EpisodeCostCallback(RLlibCallback):
     completed in the latest batch for the ν update, and are logged as RLlib env-runner metrics.
     """
 
+    def on_environment_created(self, *, env_runner, env, **kwargs) -> None:
+        # RLlib samples random actions (the first iterations, [C]) from the vector env's action
+        # space and never seeds it; seed it like the envs, so a run repeats from config.seed.
+        if env_runner.config.seed is not None:
+            env.action_space.seed(env_runner.config.seed + env_runner.worker_index)
+
     def on_episode_start(self, *, episode, **kwargs) -> None:
         episode.custom_data[EPISODE_COST] = 0.0
         episode.custom_data[EPISODE_RETURN] = 0.0
