@@ -2,23 +2,34 @@
 
 Everything goes through ``MlflowClient`` with an explicit tracking URI (trials run in other
 processes and other working directories). Child runs are found again by their Tune trial id,
-so a resumed sweep continues the same runs instead of duplicating them. Metric logging buffers
-and retries: a tracking server that is away for a while costs no data and leaves a tag saying so.
+so a resumed sweep continues the same runs instead of duplicating them. A tracking server that
+is away for a while (restart, network) costs no data: metrics and tags are buffered and sent
+later, with a tag saying so; the other calls wait for it, up to ``RETRY_S`` seconds.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
-from mlflow.entities import Metric, Param, RunTag
-from mlflow.tracking import MlflowClient
+# MLflow's own HTTP retries (7, exponential backoff: minutes per call) would stall a trial on
+# every call while a server is down; fail fast there and retry here (RetryingClient, flush).
+os.environ.setdefault("MLFLOW_HTTP_REQUEST_MAX_RETRIES", "1")
+os.environ.setdefault("MLFLOW_HTTP_REQUEST_BACKOFF_FACTOR", "1")
+os.environ.setdefault("MLFLOW_HTTP_REQUEST_TIMEOUT", "30")
+
+from mlflow.entities import Metric, Param, RunTag  # noqa: E402
+from mlflow.exceptions import MlflowException  # noqa: E402
+from mlflow.tracking import MlflowClient  # noqa: E402
 
 SWEEP_TAG, TRIAL_TAG, NODE_TAG = "lac.sweep", "lac.trial_id", "lac.node_id"
 CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
 PARENT_TAG = "mlflow.parentRunId"
+GAP_TAG, GAP_SECONDS_TAG = "lac.tracking_gap_retries", "lac.tracking_gap_s"
+RETRY_S = float(os.environ.get("LAC_TRACKING_RETRY_S", "120"))  # how long a call waits for the server
 
 
 def default_tracking_uri(cwd: str | None = None) -> str:
@@ -65,19 +76,89 @@ def _params(d: dict) -> list[Param]:
     return [Param(k, (v if isinstance(v, str) else json.dumps(v, default=str))[:6000]) for k, v in d.items()]
 
 
+def _transient(e: Exception) -> bool:
+    """A tracking server that is away or restarting (no connection, timeout, 5xx), not a bad request."""
+    import requests
+
+    if isinstance(e, (requests.ConnectionError, requests.Timeout, ConnectionError, TimeoutError)):
+        return True
+    if isinstance(e, requests.HTTPError):  # artifact uploads and downloads
+        return e.response is not None and e.response.status_code >= 500
+    if isinstance(e, MlflowException):  # rest_utils wraps every transport failure as "API request to ... failed"
+        return str(e).startswith("API request to") or e.get_http_status_code() >= 500
+    return False
+
+
+class RetryingClient:
+    """An ``MlflowClient`` whose calls wait out an unreachable server: retries with backoff
+    (1, 2, 4, 8, 10, 10 ... s) for up to ``RETRY_S``, then the error is raised."""
+
+    def __init__(self, client: MlflowClient, on_retry=None, on_recover=None):
+        self._client = client
+        self._on_retry, self._on_recover = on_retry or (lambda e: None), on_recover or (lambda: None)
+
+    def __getattr__(self, name):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        attr = getattr(self._client, name)
+        if not callable(attr):
+            return attr
+
+        def call(*args, **kwargs):
+            start, delay = time.monotonic(), 1.0
+            while True:
+                try:
+                    result = attr(*args, **kwargs)
+                except Exception as e:  # noqa: BLE001 - sorted by _transient
+                    if not _transient(e) or time.monotonic() - start + delay > RETRY_S:
+                        raise
+                    self._on_retry(e)
+                    time.sleep(delay)
+                    delay = min(2 * delay, 10.0)
+                    continue
+                if delay > 1.0:
+                    self._on_recover()
+                return result
+
+        return call
+
+
 class TrialTracker:
-    """The child run of one trial (used inside the Tune trial process)."""
+    """The child run of one trial (used inside the Tune trial process).
+
+    Metrics and tags are buffered: while the server is away they wait (training goes on) and
+    go out with the next successful call, with a ``lac.tracking_gap_retries`` tag counting the
+    failed attempts (``lac.tracking_gap_s``: seconds without the server). Everything else
+    (setup, texts, artifacts, finish) waits for the server, up to ``RETRY_S``.
+    """
 
     def __init__(self, uri: str, experiment: str, parent_run_id: str | None, trial_id: str, run_name: str):
-        self.client = MlflowClient(uri)
-        self.experiment_id = experiment_id(self.client, experiment, local_artifact_root(uri))
+        self.uri = uri
+        self._raw = MlflowClient(uri)
+        self.client = RetryingClient(self._raw, on_retry=self._gap, on_recover=self._recovered)
         self.parent_run_id, self.trial_id, self.run_name = parent_run_id, trial_id, run_name
         self.run_id: str | None = None
         self._pending: list[Metric] = []
-        self._failures = 0
+        self._tags: dict[str, str] = {}
+        self._failures, self._reported, self._gap_s, self._down_since = 0, 0, 0.0, None
+        self.experiment_id = experiment_id(self.client, experiment, local_artifact_root(uri))
+
+    def _gap(self, error: Exception) -> None:
+        self._failures += 1
+        if self._down_since is None:
+            self._down_since = time.monotonic()
+            print(f"[lac tracking] {self.uri} unreachable ({str(error)[:200]}); buffering and retrying",
+                  file=sys.stderr, flush=True)
+
+    def _recovered(self) -> None:
+        if self._down_since is not None:
+            self._gap_s += time.monotonic() - self._down_since
+            self._down_since = None
+            print(f"[lac tracking] {self.uri} reachable again after {self._failures} failed attempts",
+                  file=sys.stderr, flush=True)
 
     def open(self, params: dict, tags: dict) -> str:
-        """Find this trial's run (resume) or create it; log params and tags once."""
+        """Find this trial's run (resume, retry) or create it; log params and tags once."""
         found = self.client.search_runs(
             [self.experiment_id], filter_string=f"tags.`{TRIAL_TAG}` = '{self.trial_id}'", max_results=1)
         if found:
@@ -97,30 +178,47 @@ class TrialTracker:
         self._pending += [Metric(k, float(v), now, int(step)) for k, v in metrics.items()]
         self.flush()
 
-    def flush(self) -> bool:
-        """Send buffered metrics; on failure keep them for the next call and count the gap."""
-        try:
-            for i in range(0, len(self._pending), 900):  # log_batch takes at most 1000 metrics
-                self.client.log_batch(self.run_id, metrics=self._pending[i:i + 900])
-        except Exception:  # noqa: BLE001 - the store may be away; keep everything and retry
-            self._failures += 1
+    def set_tags(self, tags: dict) -> None:
+        self._tags.update({k: str(v) for k, v in tags.items()})
+        self.flush()
+
+    def flush(self, wait: bool = False) -> bool:
+        """Send buffered metrics and tags. If the server is away, keep them for the next call and
+        return False; with ``wait``, retry up to ``RETRY_S`` and then raise."""
+        if self.run_id is None:
             return False
-        self._pending = []
-        if self._failures:
-            self.client.set_tag(self.run_id, "lac.tracking_gap_retries", str(self._failures))
+        client = self.client if wait else self._raw
+        try:
+            while True:
+                if self._failures != self._reported:  # report the gap along with the data
+                    gap = self._gap_s + (time.monotonic() - self._down_since if self._down_since is not None else 0)
+                    self._tags.update({GAP_TAG: str(self._failures), GAP_SECONDS_TAG: f"{gap:.1f}"})
+                    self._reported = self._failures
+                if not (self._pending or self._tags):
+                    break
+                metrics, tags = self._pending[:900], list(self._tags.items())[:100]  # log_batch limits
+                client.log_batch(self.run_id, metrics=metrics, tags=[RunTag(k, v) for k, v in tags])
+                del self._pending[:len(metrics)]
+                for k, v in tags:
+                    if self._tags.get(k) == v:
+                        del self._tags[k]
+        except Exception as e:  # noqa: BLE001 - the store may be away; keep everything and retry
+            if wait:
+                raise
+            self._gap(e)
+            return False
+        self._recovered()
         return True
 
     def log_artifacts(self, local_dir: str, artifact_path: str | None = None) -> None:
+        self.flush(wait=True)  # the metrics first: the final artifacts are read back from them
         self.client.log_artifacts(self.run_id, local_dir, artifact_path)
 
     def log_text(self, text: str, name: str) -> None:
         self.client.log_text(self.run_id, text, name)
 
-    def set_tags(self, tags: dict) -> None:
-        self.client.log_batch(self.run_id, tags=[RunTag(k, str(v)) for k, v in tags.items()])
-
     def finish(self, status: str = "FINISHED") -> None:
-        self.flush()
+        self.flush(wait=True)
         self.client.set_terminated(self.run_id, status=status)
 
 
@@ -129,7 +227,7 @@ class SweepTracker:
 
     def __init__(self, uri: str, experiment: str):
         self.uri, self.experiment = uri, experiment
-        self.client = MlflowClient(uri)
+        self.client = RetryingClient(MlflowClient(uri))
         self.experiment_id = experiment_id(self.client, experiment, local_artifact_root(uri))
 
     def start(self, name: str, params: dict, tags: dict, run_id: str | None = None) -> str:

@@ -29,7 +29,7 @@ SMALL = dict(
 
 # Navigation: 2 iterations of 500 steps, 400-step episodes. Episodes [0, 400) and [400, 800)
 # complete (the second across the chunk boundary at step 500), [800, 1000) is left ongoing.
-# Iteration 0 acts at random (action space seeded below), iteration 1 with the generator.
+# Iteration 0 acts at random (LAC seeds the action space from config.seed), iteration 1 with the generator.
 NAV_ITER_STEPS, NAV_ITERS, NAV_EPISODE_STEPS = 500, 2, 400
 # Random walks reach a hazard only after a few hundred steps, and not from every start: these
 # seeds give positive (and zero) costs within the 1000 steps, so the alignment check has teeth.
