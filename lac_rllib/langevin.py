@@ -25,7 +25,7 @@ from typing import Callable
 
 import torch
 
-from lac_rllib.networks import CriticEnsemble, gaussian_log_prob
+from lac_rllib.networks import CriticEnsemble
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
 STARTS = ("informative", "noninformative")

@@ -22,3 +22,15 @@ def tiny_config(task="lac/PointHazard-v0", seed=0, **overrides):
     from lac_rllib.config import LACConfig
 
     return LACConfig().task(task).training(**overrides).debugging(seed=seed)
+
+
+@pytest.fixture(scope="session")
+def checkpoint(ray_session, tmp_path_factory):
+    """One tiny PointHazard checkpoint per session (lac-train's layout), for restore/evaluation tests."""
+    from lac_rllib.train import build_config, train
+
+    out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"
+    config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+                                                     "random_iterations": 1})
+    train(config, 1500, str(out), log=lambda *a, **k: None)
+    return str(out / "checkpoint")

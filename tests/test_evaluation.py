@@ -20,24 +20,6 @@ from lac_rllib.evaluation import (
 TASK = "lac/PointHazard-v0"
 
 
-def tiny_checkpoint(tmp_path_factory) -> str:
-    """One tiny PointHazard checkpoint per pytest session (shared with tests/sweeps/)."""
-    from lac_rllib.train import build_config, train
-
-    out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"
-    ckpt = out / "checkpoint"
-    if not (ckpt / "rllib_checkpoint.json").exists():
-        config = build_config(TASK, 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
-                                        "random_iterations": 1})
-        train(config, 1500, str(out), log=lambda *a, **k: None)
-    return str(ckpt)
-
-
-@pytest.fixture(scope="module")
-def checkpoint(ray_session, tmp_path_factory):
-    return tiny_checkpoint(tmp_path_factory)
-
-
 @pytest.fixture(scope="module")
 def policy(checkpoint):
     return restore_policy(checkpoint)

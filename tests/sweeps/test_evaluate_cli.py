@@ -19,20 +19,6 @@ TASK = "lac/PointHazard-v0"
 
 
 
-@pytest.fixture(scope="module")
-def checkpoint(ray_session, tmp_path_factory):
-    """The session's tiny PointHazard checkpoint (trained once, shared with tests/test_evaluation.py)."""
-    from lac_rllib.train import build_config, train
-
-    out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"
-    ckpt = out / "checkpoint"
-    if not (ckpt / "rllib_checkpoint.json").exists():
-        config = build_config(TASK, 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
-                                        "random_iterations": 1})
-        train(config, 1500, str(out), log=lambda *a, **k: None)
-    return str(ckpt)
-
-
 def run_main(capsys, *argv):
     """Run the CLI's main() in-process: (exit code, stdout, stderr)."""
     try:
