@@ -59,6 +59,10 @@ def param_space(plan: dict, args, parent_run_id: str) -> dict:
 def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
     if not ray.is_initialized():  # tests drive sweeps inside their own Ray session
         ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    if args.max_concurrent is None and args.address:  # the plan could only count this machine's CPUs
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        plan["concurrency"] = min(plan["n_trials"], max(1, cpus // args.cpus_per_trial))
+        print(f"  cluster: {cpus} CPUs -> {plan['concurrency']} trials at once", flush=True)
     tracker = SweepTracker(plan["tracking_uri"], plan["experiment"])
     state_file = sweep_dir / "sweep.json"
     previous = json.loads(state_file.read_text()) if args.resume else {}

@@ -110,7 +110,9 @@ def test_resume_after_driver_sigkill(tmp_path):
     try:
         while time.time() < deadline:  # wait for one finished trial and one started after it
             time.sleep(2)
-            if (tmp_path / "mlflow.db").exists():
+            # sweep.json is written after the parent run exists: polling earlier could race the
+            # driver creating MLflow's tables.
+            if (tmp_path / "ray_results" / "smoke-PointHazard-v0-smoke" / "sweep.json").exists():
                 try:
                     _, _, children = _runs(tmp_path)
                 except Exception:  # noqa: BLE001 - the store may be mid-creation
