@@ -138,6 +138,7 @@ class TrialTracker:
         self.client = RetryingClient(self._raw, on_retry=self._gap, on_recover=self._recovered)
         self.parent_run_id, self.trial_id, self.run_name = parent_run_id, trial_id, run_name
         self.run_id: str | None = None
+        self.previous = None  # the run as an earlier attempt left it (resume, retry)
         self._pending: list[Metric] = []
         self._tags: dict[str, str] = {}
         self._failures, self._reported, self._gap_s, self._down_since = 0, 0, 0.0, None
@@ -163,7 +164,9 @@ class TrialTracker:
             [self.experiment_id], filter_string=f"tags.`{TRIAL_TAG}` = '{self.trial_id}'", max_results=1)
         if found:
             self.run_id = found[0].info.run_id
-            self.client.update_run(self.run_id, status="RUNNING")
+            self.previous = found[0]  # what an earlier attempt left (status, tags, metrics)
+            if found[0].info.status != "FINISHED":
+                self.client.update_run(self.run_id, status="RUNNING")
             return self.run_id
         all_tags = {TRIAL_TAG: self.trial_id, "mlflow.runName": self.run_name, **tags}
         if self.parent_run_id:
@@ -172,6 +175,12 @@ class TrialTracker:
         self.run_id = run.info.run_id
         self.client.log_batch(self.run_id, params=_params(params))
         return self.run_id
+
+    def logged_up_to(self, key: str) -> int:
+        """The largest step logged for ``key`` by earlier attempts of this trial (0 if none)."""
+        if self.previous is None:
+            return 0
+        return max((m.step for m in self.client.get_metric_history(self.run_id, key)), default=0)
 
     def log_metrics(self, metrics: dict, step: int) -> None:
         now = int(time.time() * 1000)

@@ -57,11 +57,23 @@ class LACTrainable(tune.Trainable):
         tags = {NODE_TAG: ray.get_runtime_context().get_node_id(), "lac.host": socket.gethostname(),
                 "lac.tune_trial_name": self.trial_name, "lac.group": config.get("group", "")}
         self.tracker.open(params, tags)
+        prev = self.tracker.previous
+        # A trial killed after its run FINISHED but before Tune persisted its last checkpoint is
+        # complete: it must not train (and log) again on resume.
+        self.already_finished = bool(prev and prev.info.status == "FINISHED" and CHECKPOINT_TAG in prev.data.tags)
+        # Iterations replayed from the last checkpoint do not log steps MLflow already has, so
+        # every metric history stays one point per step; the tag says where training picked up.
+        self.logged_up_to = self.tracker.logged_up_to(ENV_STEPS)
+        if self.logged_up_to and not self.already_finished:
+            self.tracker.set_tags({"lac.resumed_after_env_steps": self.logged_up_to})
         self.tracker.set_tags({NODE_TAG: tags[NODE_TAG]})  # the node of the latest (re)start
         self.tracker.log_text(json.dumps({**params, "cost_limit": self.lac_config.effective_cost_limit},
                                          indent=2, default=str), "config.json")
 
     def step(self) -> dict:
+        if self.already_finished:
+            final = {k: v for k, v in self.tracker.previous.data.metrics.items()}
+            return {**final, "done": True}
         try:
             if self.iteration + 1 == self.spec.get("fail_at_iteration"):
                 raise RuntimeError(f"injected failure at iteration {self.iteration + 1} (fail_at_iteration)")
@@ -75,7 +87,8 @@ class LACTrainable(tune.Trainable):
             metrics["objective"] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])
             metrics["constraint"] = metrics[EPISODE_COST] - metrics[COST_LIMIT]  # ≤ 0 is feasible
             metrics["wall_time_s"] = float(r.get("time_total_s", 0.0))
-            self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
+            if metrics[ENV_STEPS] > self.logged_up_to:
+                self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
             done = metrics[ENV_STEPS] >= self.timesteps
             if done:
                 self._finish_run()
