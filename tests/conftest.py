@@ -24,6 +24,21 @@ def tiny_config(task="lac/PointHazard-v0", seed=0, **overrides):
     return LACConfig().task(task).training(**overrides).debugging(seed=seed)
 
 
+def train_batch(algo) -> dict:
+    """The train batch LAC's learner builds from the whole replay buffer, as numpy columns."""
+    import copy
+
+    import torch
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
+    learner = algo.learner_group._learner
+    batch = learner._learner_connector(
+        rl_module=learner.module, batch={}, episodes=[copy.copy(e) for e in algo.replay_buffer.episodes],
+        shared_data={}, metrics=learner.metrics,
+    )[DEFAULT_MODULE_ID]
+    return {k: (v.numpy() if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
+
+
 @pytest.fixture(scope="session")
 def checkpoint(ray_session, tmp_path_factory):
     """One tiny PointHazard checkpoint per session (lac-train's layout), for restore/evaluation tests."""

@@ -1,6 +1,5 @@
 """LAC inside RLlib: cost alignment, ν from completed episodes, module roles, checkpoints."""
 
-import copy
 
 import numpy as np
 import pytest
@@ -9,20 +8,11 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from conftest import tiny_config
+from conftest import tiny_config, train_batch
 from lac_rllib.algorithm import LAC
 from lac_rllib.connectors import COSTS
 
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
-
-
-def _train_batch(algo):
-    learner = algo.learner_group._learner
-    batch = learner._learner_connector(
-        rl_module=learner.module, batch={}, episodes=[copy.copy(e) for e in algo.replay_buffer.episodes],
-        shared_data={}, metrics=learner.metrics,
-    )[DEFAULT_MODULE_ID]
-    return {k: (v.numpy() if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
 
 
 @pytest.mark.parametrize("num_env_runners", [0, 1])
@@ -35,7 +25,7 @@ def test_every_train_row_carries_its_own_cost(ray_session, num_env_runners):
     try:
         for _ in range(3):
             result = algo.train()
-        b = _train_batch(algo)
+        b = train_batch(algo)
         t = b[Columns.OBS][:, 0]
         assert len(t) == 150
         np.testing.assert_array_equal(b[COSTS], 2 * t + 1)

@@ -10,15 +10,13 @@ Short runs (navigation and FOCOPS velocity): a few thousand env steps finish wit
 and report the episode cost per the task's convention (sum or Σ 0.99^t c_t).
 """
 
-import copy
 
 import numpy as np
 import pytest
-import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
-from conftest import tiny_config
+from conftest import tiny_config, train_batch
 from lac_rllib.connectors import COSTS
 from lac_rllib.tasks import get_task
 
@@ -39,16 +37,6 @@ NAV_SEEDS = {
     "SafetyPointButton1-v0": 1,
     "SafetyCarButton1-v0": 0,
 }
-
-
-def _train_batch(algo):
-    """The batch the learner builds from the whole replay buffer (as in test_algorithm.py)."""
-    learner = algo.learner_group._learner
-    batch = learner._learner_connector(
-        rl_module=learner.module, batch={}, episodes=[copy.copy(e) for e in algo.replay_buffer.episodes],
-        shared_data={}, metrics=learner.metrics,
-    )[DEFAULT_MODULE_ID]
-    return {k: (v.numpy() if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
 
 
 def _replay(task_id, env_config, seed, episodes):
@@ -108,7 +96,7 @@ def test_navigation_costs_reach_the_train_batch_row_by_row(ray_session, task_id)
         runner_seed = algo.env_runner_group.foreach_env_runner(
             lambda runner: runner._seed, local_env_runner=False)[0]
         episodes = list(algo.replay_buffer.episodes)
-        batch = _train_batch(algo)
+        batch = train_batch(algo)
     finally:
         algo.stop()
 
@@ -154,7 +142,7 @@ def _short_run(task_id, iterations=3, steps=1000, **overrides):
     try:
         results = [algo.train() for _ in range(iterations)]
         episodes = list(algo.replay_buffer.episodes)
-        batch = _train_batch(algo)
+        batch = train_batch(algo)
     finally:
         algo.stop()
     assert results[-1]["env_steps"] >= iterations * steps
