@@ -94,7 +94,7 @@ def bench_sampling(task_ids: list[str] | None = None, steps: int = 3000, seed: i
     rows = []
     for task_id in task_ids or sampling_tasks():
         raw = _raw_row(task_id, steps, seed)
-        config = LACConfig().task(task_id).debugging(seed=seed).env_runners(num_env_runners=0)
+        config = LACConfig().task(task_id).training(total_env_steps=steps).debugging(seed=seed).env_runners(num_env_runners=0)
         algo = config.build_algo()
         try:
             runner = algo.env_runner

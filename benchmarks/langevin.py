@@ -117,7 +117,7 @@ def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
 
     obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
     act_space = gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32)
-    config = LACConfig().training(cost_limit=25.0)
+    config = LACConfig().training(cost_limit=25.0, lr_schedule="constant")
     learner = config.build_learner(spaces={DEFAULT_MODULE_ID: (obs_space, act_space)})
     rng = np.random.default_rng(0)
     n = 256 * steps

@@ -45,7 +45,7 @@ def main() -> None:
 
     start = time.perf_counter()
     for t in plan["trials"]:
-        config = build_config(t.task, t.seed, {**budget.overrides, **t.overrides})
+        config = build_config(t.task, t.seed, {**budget.overrides, **t.overrides}, timesteps=budget.timesteps)
         train(config, budget.timesteps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
     direct = time.perf_counter() - start
 

@@ -13,13 +13,15 @@ import math
 from typing import Any
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
-from ray.rllib.connectors.env_to_module.mean_std_filter import MeanStdFilter
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
+from lac_rllib.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
 
 START_MODES = ("informative", "noninformative")
 CHAIN_AT = ("next", "current")
+GRAD_CLIP_MODES = ("batch", "per_sample")
+LR_SCHEDULES = ("linear", "constant")
 
 
 @dataclasses.dataclass
@@ -39,8 +41,14 @@ class LACParams:
     """w, the weight of −log π_φ' in the energy [P; C's flag is pinned to 1 by a bug]. ≥ 0."""
     langevin_clamp: bool = True
     """Clamp ã to the action bounds after every step [C]."""
-    langevin_grad_clip: float | None = None
-    """Per-sample L2 clip of ∇_a E; None = off [D: C's minibatch-wide norm couples samples]."""
+    langevin_grad_clip: float | None = 1000.0
+    """Clip of ∇_a E at every chain step [C: 1000]; None = off. In the paper's regime (λ = 1e-3)
+    it is active from the first iteration and sets how far the chain moves; off, a review
+    measured 66-98% of chain end points pinned at the action bound (SPEC §1)."""
+    langevin_grad_clip_mode: str = "batch"
+    """"batch": one L2 norm over the whole minibatch's ∇_a E (B × A) [C]; "per_sample": each
+    sample's gradient clipped to langevin_grad_clip/√B, the same step when gradients are alike
+    without coupling unrelated samples [D]."""
 
     # --- critics (SPEC §2, eqs. 12-13) ---
     cost_gamma: float = 0.99
@@ -50,7 +58,7 @@ class LACParams:
     bootstrap_on_truncation: bool = True
     """Bootstrap through time-limit truncation [D]; False treats it as terminal, like [C]."""
     critic_lr: float = 3e-4
-    """Adam learning rate of the four critics [P]."""
+    """Adam learning rate of the four critics at the start of the run [P]."""
     critic_hidden: tuple = (256, 256, 256)
     """Hidden layers of each critic (obs+act → Mish MLP → Q) [C]."""
 
@@ -61,7 +69,7 @@ class LACParams:
     """Where the actor's target chain runs: "next" reuses the critic chain at s' [C];
     "current" runs a second chain at s as eq. (15) writes [P]."""
     actor_lr: float = 3e-4
-    """Adam learning rate of the generator actor [P]."""
+    """Adam learning rate of the generator actor at the start of the run [P]."""
     actor_grad_clip: float | None = 40.0
     """Global gradient-norm clip of the actor [C]; None = off."""
     actor_update_start_iteration: int = 1
@@ -72,14 +80,19 @@ class LACParams:
     """Activation of the actor MLP [P Tables 4-5]."""
     log_std_init: float = -0.5
     """Initial state-independent log-std of the actor [P Tables 4-5]."""
+    actor_mean_init_scale: float | None = 0.1
+    """The actor's mean-head weights are multiplied by this at init and its bias zeroed [C], so
+    the first policy acts near 0; None keeps nn.Linear's init of the head."""
 
     # --- Lagrange multiplier (SPEC §4, eq. 14) ---
     nu_init: float = 0.0
     """ν₀ [P, C]. ≥ 0."""
     nu_lr: float = 0.01
     """α_ν, step of the projected ν update eq. (14) [P, C]. ≥ 0 (0 pins ν at ν₀)."""
-    nu_max_adaptive: bool = False
-    """[C]'s upper bound ν ≤ 2·|mean y_R|/|mean y_C| (2 at first). Off by default [P has none]."""
+    nu_max_adaptive: bool = True
+    """Upper bound on ν [C]: 2 in the first iteration, then 2·|mean y_R| / |mean y_C| over the
+    latest iteration's minibatches, so the cost term cannot take over the chain while the reward
+    critic is small (SPEC §4). False: ν unbounded, as [P] writes eq. (14)."""
 
     # --- data and schedule (SPEC §5) ---
     env_steps_per_iteration: int = 5000
@@ -92,12 +105,26 @@ class LACParams:
     """Passes over the buffer per iteration ("1 epoch") [P, C]: ≈ buffer/minibatch steps."""
     polyak_tau: float = 0.005
     """Polyak τ for all target networks, applied after every gradient step [C]."""
+    polyak_from_actor_start: bool = True
+    """Polyak updates begin with the first actor update (actor_update_start_iteration) [C];
+    False: from the first gradient step."""
+    lr_schedule: str = "linear"
+    """"linear": both learning rates decay linearly from their start to lr_final_fraction × start
+    over total_env_steps [C], through RLlib's lr schedules; "constant": no decay."""
+    lr_final_fraction: float = 0.5
+    """The learning rates at the end of the budget, as a fraction of their start [C: 0.5]. (0, 1]."""
+    total_env_steps: int | None = None
+    """The run's budget in env steps, the horizon of the linear lr decay. lac-train and the sweep
+    set it from their budget; required when lr_schedule is "linear"."""
     random_iterations: int = 5
     """Iterations that act uniformly at random before the generator takes over [C]."""
     obs_normalization: bool = True
     """Running mean/std observation filter [C]; its state is checkpointed."""
     obs_clip: float = 5.0
     """Clip of the normalised observation [C]."""
+    obs_std_floor: float = 1e-2
+    """The filter divides by max(std, obs_std_floor) [C], so a near-constant observation
+    dimension is not blown up to ±obs_clip; 0 = RLlib's std + 1e-8."""
     torch_threads: int = 1
     """Intra-op torch threads of the learner process [D]: minibatch tensors are small, and on a
     shared 2-core machine 2 threads made one critic-gradient op ~250x slower than 1 (measured).
@@ -154,7 +181,7 @@ def check_field(name: str, value: Any) -> None:
 
     positive = {"langevin_step_size", "temperature", "critic_lr", "actor_lr", "obs_clip",
                 "gradient_passes"}
-    non_negative = {"logp_weight", "beta", "nu_init", "nu_lr", "reward_scale"}
+    non_negative = {"logp_weight", "beta", "nu_init", "nu_lr", "reward_scale", "obs_std_floor"}
     pos_int = {"langevin_steps", "env_steps_per_iteration", "replay_capacity", "lac_minibatch_size",
                "torch_threads"}
     if name in pos_int and not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
@@ -171,9 +198,9 @@ def check_field(name: str, value: Any) -> None:
         real(value) and 0 < value <= 1
     ):
         bad("a number in (0, 1]")
-    if name == "polyak_tau" and not (real(value) and 0 < value <= 1):
+    if name in ("polyak_tau", "lr_final_fraction") and not (real(value) and 0 < value <= 1):
         bad("a number in (0, 1]")
-    if name in ("langevin_grad_clip", "actor_grad_clip") and value is not None and not (real(value) and value > 0):
+    if name in ("langevin_grad_clip", "actor_grad_clip", "actor_mean_init_scale") and value is not None and not (real(value) and value > 0):
         bad("None or a finite number > 0")
     if name == "cost_limit" and value is not None and not (real(value) and value >= 0):
         bad("None or a finite number >= 0")
@@ -181,6 +208,17 @@ def check_field(name: str, value: Any) -> None:
         bad(" | ".join(START_MODES))
     if name == "actor_chain_at" and value not in CHAIN_AT:
         bad(" | ".join(CHAIN_AT))
+    if name == "langevin_grad_clip_mode" and value not in GRAD_CLIP_MODES:
+        bad(" | ".join(GRAD_CLIP_MODES))
+    if name == "lr_schedule" and value not in LR_SCHEDULES:
+        bad(" | ".join(LR_SCHEDULES))
+    if name == "total_env_steps" and value is not None and not (
+        isinstance(value, int) and not isinstance(value, bool) and value >= 1
+    ):
+        bad("None or an integer >= 1")
+    if name in ("nu_max_adaptive", "polyak_from_actor_start", "langevin_clamp", "obs_normalization",
+                "bootstrap_on_truncation") and not isinstance(value, bool):
+        bad("True | False")
     if name in ("actor_hidden", "critic_hidden") and not (
         len(tuple(value)) >= 1 and all(isinstance(h, int) and h >= 1 for h in value)
     ):
@@ -270,6 +308,17 @@ class LACConfig(AlgorithmConfig):
         for name, value in self.lac_params().items():
             check_field(name, value)
         self.effective_cost_limit  # noqa: B018  (raises if undefined)
+        if self.lr_schedule == "linear" and self.total_env_steps is None:
+            raise ValueError(
+                "LAC config field total_env_steps=None is invalid with lr_schedule='linear' (the decay "
+                "needs the run's budget); accepted: an integer >= 1, or lr_schedule='constant'")
+
+    def lr_or_schedule(self, lr: float):
+        """``lr`` as RLlib's ``lr_or_lr_schedule``: piecewise-linear [[0, lr], [budget, f·lr]] in
+        env steps (RLlib's Scheduler holds the last value after the budget), or the constant."""
+        if self.lr_schedule == "constant":
+            return lr
+        return [[0, lr], [int(self.total_env_steps), lr * self.lr_final_fraction]]
 
     def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
         # "auto" splits env_steps_per_iteration (not the minibatch size) over the runners.
@@ -286,7 +335,7 @@ class LACConfig(AlgorithmConfig):
             # Running mean/std, clipped [C]. It writes the normalised observation back into
             # the episode, so replay and learner see what the actor saw; its state is part of
             # the env runners' state, hence of every checkpoint.
-            pipeline.prepend(MeanStdFilter(clip_by_value=self.obs_clip))
+            pipeline.prepend(FlooredMeanStdFilter(clip_by_value=self.obs_clip, std_floor=self.obs_std_floor))
         return pipeline
 
     def get_default_rl_module_spec(self) -> RLModuleSpec:

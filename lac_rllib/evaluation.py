@@ -205,12 +205,13 @@ def _restore_env_to_module(pipeline_dir: str):
         if filters:
             trained = filters[0]
             _, ctor_kwargs = trained.get_ctor_args_and_kwargs()
-            frozen = MeanStdFilter(**{**ctor_kwargs, "update_stats": False})
-            # insert_after sets the frozen filter's spaces; remove() drops the first
-            # MeanStdFilter, i.e. the trained one.
-            pipeline.insert_after(MeanStdFilter, frozen)
+            cls = type(trained)  # LAC's FlooredMeanStdFilter (older checkpoints: RLlib's own)
+            frozen = cls(**{**ctor_kwargs, "update_stats": False})
+            # insert_after sets the frozen filter's spaces; remove() drops the first filter of
+            # exactly this class, i.e. the trained one.
+            pipeline.insert_after(cls, frozen)
             frozen.set_state(trained.get_state())
-            pipeline.remove(MeanStdFilter)
+            pipeline.remove(cls)
     except CheckpointError:
         raise
     except Exception as e:  # noqa: BLE001

@@ -31,56 +31,96 @@ GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
 STARTS = ("informative", "noninformative")
 
 
+CLIP_MODES = ("batch", "per_sample")
+
+
 @dataclass
 class ChainResult:
     action: torch.Tensor        # (B, A) ã_T, detached
     energy_start: torch.Tensor  # (B,) E(s, ã_0)
     energy_end: torch.Tensor    # (B,) E(s, ã_T)
     displacement: torch.Tensor  # (B,) ‖ã_T − ã_0‖₂
+    # Chain health (scalars): is the chain doing what the paper intends, or is it pinned at the
+    # bounds / throttled by the clip?
+    grad_norm: torch.Tensor     # mean over steps and samples of ‖∇_a E‖₂, before the clip
+    clip_fraction: torch.Tensor  # fraction of steps (batch mode) / sample-steps (per sample) clipped
+    at_bound: torch.Tensor      # fraction of end points with a coordinate on (or past) a bound
+
+
+def clip_grad(grad: torch.Tensor, clip: float, mode: str = "batch") -> tuple[torch.Tensor, torch.Tensor]:
+    """Clip ∇_a E (B, A) → (clipped, clipped? as float: () in batch mode, (B,) per sample).
+
+    "batch" [C]: one L2 norm over the whole (B × A) tensor, scaled to at most ``clip``: every
+    sample's step shrinks by the same factor. "per_sample" [D]: each row to ``clip/√B``, the
+    same length when the rows are alike, without one wild sample shrinking everyone's step.
+    """
+    if mode == "batch":
+        norm = torch.linalg.vector_norm(grad)
+        scale = (clip / norm.clamp_min(1e-12)).clamp(max=1.0)
+        return grad * scale, (scale < 1.0).to(grad.dtype)
+    if mode == "per_sample":
+        bound = clip / math.sqrt(grad.shape[0])
+        norm = torch.linalg.vector_norm(grad, dim=-1, keepdim=True)
+        scale = (bound / norm.clamp_min(1e-12)).clamp(max=1.0)
+        return grad * scale, (scale.squeeze(-1) < 1.0).to(grad.dtype)
+    raise ValueError(f"grad_clip_mode={mode!r}; accepted: {' | '.join(CLIP_MODES)}")
 
 
 def _as_bound(x, like: torch.Tensor):
     return None if x is None else torch.as_tensor(x, dtype=like.dtype, device=like.device)
 
 
-def _check_chain_args(steps: int, step_size: float, grad_clip) -> None:
+def _check_chain_args(steps: int, step_size: float, grad_clip, grad_clip_mode: str = "batch") -> None:
     if not (isinstance(steps, int) and steps >= 1):
         raise ValueError(f"steps={steps!r}; must be an integer ≥ 1")
     if not step_size > 0:
         raise ValueError(f"step_size={step_size!r}; must be > 0")
     if grad_clip is not None and not grad_clip > 0:
         raise ValueError(f"grad_clip={grad_clip!r}; must be > 0 or None")
+    if grad_clip_mode not in CLIP_MODES:
+        raise ValueError(f"grad_clip_mode={grad_clip_mode!r}; accepted: {' | '.join(CLIP_MODES)}")
 
 
 @torch.no_grad()
 def run_chain(grad_fn: GradFn, a0: torch.Tensor, *, steps: int, step_size: float,
               noise: torch.Tensor | None = None, generator: torch.Generator | None = None,
-              low=None, high=None, grad_clip: float | None = None) -> ChainResult:
-    """Generic unadjusted Langevin chain (eq. 9); ``grad_fn(a) -> (E (B,), ∇_a E (B, A))``."""
-    _check_chain_args(steps, step_size, grad_clip)
+              low=None, high=None, grad_clip: float | None = None,
+              grad_clip_mode: str = "batch") -> ChainResult:
+    """Generic unadjusted Langevin chain (eq. 9); ``grad_fn(a) -> (E (B,), ∇_a E (B, A))``.
+
+    ``grad_clip`` (None = off) bounds ∇_a E at every step as :func:`clip_grad` says.
+    """
+    _check_chain_args(steps, step_size, grad_clip, grad_clip_mode)
     if noise is not None and noise.shape != (steps, *a0.shape):
         raise ValueError(f"noise.shape={tuple(noise.shape)}; expected {(steps, *a0.shape)}")
     low, high = _as_bound(low, a0), _as_bound(high, a0)
     half_eta, sqrt_eta = 0.5 * step_size, math.sqrt(step_size)
     a0 = a0.detach()
     a, energy_start = a0, None
+    norm_sum = torch.zeros((), dtype=a0.dtype, device=a0.device)
+    clipped_sum = torch.zeros((), dtype=a0.dtype, device=a0.device)
     for i in range(steps):
         energy, grad = grad_fn(a)
         if i == 0:
             energy_start = energy
+        norm_sum += torch.linalg.vector_norm(grad, dim=-1).mean()
         if grad_clip is not None:
-            # Per sample, not one minibatch-wide norm [C]: a single sample with an exploding
-            # gradient must not shrink the step of every other state in the batch (SPEC §1).
-            norm = grad.norm(dim=-1, keepdim=True)
-            grad = grad * (grad_clip / norm.clamp_min(1e-12)).clamp(max=1.0)
+            grad, clipped = clip_grad(grad, grad_clip, grad_clip_mode)
+            clipped_sum += clipped.mean()
         z = noise[i] if noise is not None else torch.randn(
             a.shape, generator=generator, dtype=a.dtype, device=a.device)
         a = a - half_eta * grad + sqrt_eta * z
         if low is not None or high is not None:
             a = torch.clamp(a, min=low, max=high)  # [C] keeps the chain inside the action box
     energy_end, _ = grad_fn(a)
+    on_bound = torch.zeros(a.shape[0], dtype=torch.bool, device=a.device)
+    if low is not None:
+        on_bound |= (a <= low).any(-1)
+    if high is not None:
+        on_bound |= (a >= high).any(-1)
     return ChainResult(action=a.detach(), energy_start=energy_start, energy_end=energy_end,
-                       displacement=(a - a0).norm(dim=-1))
+                       displacement=(a - a0).norm(dim=-1), grad_norm=norm_sum / steps,
+                       clip_fraction=clipped_sum / steps, at_bound=on_bound.to(a.dtype).mean())
 
 
 def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch.Tensor,
@@ -120,14 +160,15 @@ def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch
 def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tensor,
                    log_std: torch.Tensor, *, steps: int, step_size: float, temperature: float,
                    nu, logp_weight: float = 1.0, start: str = "informative", low=None, high=None,
-                   grad_clip: float | None = None, noise: torch.Tensor | None = None,
+                   grad_clip: float | None = None, grad_clip_mode: str = "batch",
+                   noise: torch.Tensor | None = None,
                    generator: torch.Generator | None = None) -> ChainResult:
     """Algorithm 1 at states ``obs``; ``mean``/``log_std`` are the TARGET actor's π_φ'(·|s).
 
     ``noise`` (optional, for reproducible comparisons) is (T+1, B, A): ``noise[0]`` is z₀ of the
     start, ``noise[1:]`` the step noise; otherwise all noise is drawn from ``generator``.
     """
-    _check_chain_args(steps, step_size, grad_clip)
+    _check_chain_args(steps, step_size, grad_clip, grad_clip_mode)
     if not temperature > 0:
         raise ValueError(f"temperature={temperature!r}; must be > 0")
     if start not in STARTS:
@@ -148,12 +189,13 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
                                       nu=nu, logp_weight=logp_weight)
         return run_chain(grad_fn, a0, steps=steps, step_size=step_size,
                          noise=None if noise is None else noise[1:], generator=generator,
-                         low=low, high=high, grad_clip=grad_clip)
+                         low=low, high=high, grad_clip=grad_clip, grad_clip_mode=grad_clip_mode)
 
 
 def naive_langevin_chain(critics: CriticEnsemble, actor_mean_logstd_fn, obs: torch.Tensor,
                          a0: torch.Tensor, *, steps: int, step_size: float, temperature: float,
-                         nu, logp_weight: float, low, high, noise: torch.Tensor) -> ChainResult:
+                         nu, logp_weight: float, low, high, noise: torch.Tensor,
+                         grad_clip: float | None = None, grad_clip_mode: str = "batch") -> ChainResult:
     """Reference: autograd through the full critics and a fresh actor forward at every step."""
     nr = critics.n_reward
 
@@ -171,4 +213,4 @@ def naive_langevin_chain(critics: CriticEnsemble, actor_mean_logstd_fn, obs: tor
         return energy.detach(), grad
 
     return run_chain(grad_fn, a0, steps=steps, step_size=step_size, noise=noise,
-                     low=low, high=high)
+                     low=low, high=high, grad_clip=grad_clip, grad_clip_mode=grad_clip_mode)

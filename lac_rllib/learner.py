@@ -1,7 +1,9 @@
 """LACTorchLearner: the losses of LAC (eqs. 12-13 and 16), the ν update (eq. 14) and Polyak.
 
 One ``learner_group.update`` call makes a whole pass of minibatches over the replay buffer
-(Algorithm 2, lines 6-14); per minibatch: critic step, actor step, Polyak step of all targets.
+(Algorithm 2, lines 6-14); per minibatch: critic step, actor step, Polyak step of all targets
+(from the first actor update on [C]). Around the pass: ν's projected step under its bound before
+it (eq. 14, SPEC §4), the learning-rate schedules and the next bound after it.
 """
 
 from __future__ import annotations
@@ -24,6 +26,18 @@ from lac_rllib.connectors import COSTS, AddCostsFromInfos, ShuffleRows
 from lac_rllib.networks import gaussian_kl, gaussian_log_prob
 
 CRITIC, ACTOR = "critic", "actor"  # optimizer names, one per loss
+# Learner metric keys read elsewhere: ν and the bound ν_max it was held under this iteration;
+# the iteration's mean targets (they set the next iteration's bound).
+NU, NU_MAX = "nu", "nu_max"
+TARGET_REWARD_MEAN, TARGET_COST_MEAN = "target_reward_mean", "target_cost_mean"
+# Chain-health metrics are means over the last HEALTH_WINDOW minibatches: about one iteration
+# (one pass over a full 50k buffer is 195 minibatches of 256).
+HEALTH_WINDOW = 200
+CHAIN_HEALTH_KEYS = ("langevin_energy_drop", "langevin_displacement", "langevin_grad_norm",
+                     "langevin_clip_fraction", "langevin_at_bound", "actor_std_mean")
+#: What the trainer and the sweep report per iteration from the learner's results.
+REPORTED_KEYS = ("critic_loss", "actor_loss", "actor_nll", "actor_kl", "q_reward_mean", "q_cost_mean",
+                 TARGET_REWARD_MEAN, TARGET_COST_MEAN, NU_MAX, *CHAIN_HEALTH_KEYS)
 # Keys the algorithm passes in ``timesteps`` to every update call.
 TS_EPISODE_COST, TS_ITERATION = "lac_episode_cost", "lac_training_iteration"
 
@@ -63,7 +77,9 @@ class LACTorchLearner(TorchLearner):
             params = self.get_parameters(net)
             self.register_optimizer(
                 module_id=module_id, optimizer_name=name, optimizer=torch.optim.Adam(params),
-                params=params, lr_or_lr_schedule=lr,
+                # Linear decay to lr_final_fraction·lr over the budget [C], by RLlib's Scheduler
+                # (stepped after each update with the lifetime env steps).
+                params=params, lr_or_lr_schedule=config.lr_or_schedule(lr),
             )
 
     # ----- ν (eq. 14), once per iteration before the gradient steps -----
@@ -73,15 +89,23 @@ class LACTorchLearner(TorchLearner):
         episode_cost = timesteps.get(TS_EPISODE_COST)
         for mid, module in self.module._rl_modules.items():
             config = self.config.get_config_for_module(mid)
-            if config.nu_max_adaptive and self._y_sums[2] > 0:
-                mean_r, mean_c = (self._y_sums[:2] / self._y_sums[2]).tolist()
-                self._nu_max = 2.0 * abs(mean_r) / max(abs(mean_c), 1e-8)
             if episode_cost is not None:
                 module.nu.copy_(self.lagrange_step(
                     float(module.nu), episode_cost, config.effective_cost_limit, config.nu_lr,
                     self._nu_max if config.nu_max_adaptive else None,
                 ))
         self._y_sums.zero_()
+
+    def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
+        super().after_gradient_based_update(timesteps=timesteps)  # steps the lr schedules
+        if self._y_sums[2] == 0:
+            return
+        # The iteration's mean targets (every minibatch, not the last one) and, from them, [C]'s
+        # ν bound for the next iteration: ν_max = 2·|mean y_R| / |mean y_C| (SPEC §4).
+        mean_r, mean_c = (self._y_sums[:2] / self._y_sums[2]).tolist()
+        self._nu_max = 2.0 * abs(mean_r) / max(abs(mean_c), 1e-8)
+        for mid in self.module._rl_modules:
+            self.metrics.log_dict({TARGET_REWARD_MEAN: mean_r, TARGET_COST_MEAN: mean_c}, key=mid, window=1)
 
     @staticmethod
     def lagrange_step(nu: float, episode_cost: float, cost_limit: float, lr: float, nu_max=None) -> torch.Tensor:
@@ -110,12 +134,14 @@ class LACTorchLearner(TorchLearner):
             self.metrics.log_dict({
                 "critic_loss": critic_loss, "actor_loss": actor_loss, "actor_nll": nll, "actor_kl": kl,
                 "q_reward_mean": q[:n_r].mean(), "q_cost_mean": q[n_r:].mean(),
-                "target_reward_mean": y_r.mean(), "target_cost_mean": y_c.mean(),
-                "langevin_energy_drop": (chain.energy_start - chain.energy_end).mean(),
-                "langevin_displacement": chain.displacement.mean(),
-                "actor_std_mean": log_std.exp().mean(),
-                "nu": module.nu.clone(), "nu_max": torch.tensor(self._nu_max),
+                NU: module.nu.clone(),
             }, key=module_id, window=1)
+            if config.nu_max_adaptive:
+                self.metrics.log_value((module_id, NU_MAX), self._nu_max, window=1)
+            # Chain health over the last HEALTH_WINDOW minibatches (≈ this iteration's).
+            health = ((chain.energy_start - chain.energy_end).mean(), chain.displacement.mean(),
+                      chain.grad_norm, chain.clip_fraction, chain.at_bound, log_std.exp().mean())
+            self.metrics.log_dict(dict(zip(CHAIN_HEALTH_KEYS, health)), key=module_id, window=HEALTH_WINDOW)
         return critic_loss + actor_loss  # disjoint graphs: one backward serves both optimizers
 
     def postprocess_gradients_for_module(self, *, module_id, config, module_gradients_dict):
@@ -131,10 +157,13 @@ class LACTorchLearner(TorchLearner):
             self._params[pid].grad = grad
         for mid, module in self.module._rl_modules.items():
             config = self.config.get_config_for_module(mid)
+            actor_on = self._iteration >= config.actor_update_start_iteration
             for name, optim in self.get_optimizers_for_module(mid):
-                if name == ACTOR and self._iteration < config.actor_update_start_iteration:
+                if name == ACTOR and not actor_on:
                     continue
                 optim.step()
+            if config.polyak_from_actor_start and not actor_on:
+                continue  # [C]: the targets stay at their init until the actor trains
             # Algorithm 2, lines 11-13: Polyak after every gradient step.
             for main_net, target_net in module.unwrapped().get_target_network_pairs():
                 update_target_network(main_net=main_net, target_net=target_net, tau=config.polyak_tau)

@@ -44,6 +44,7 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         self.actor = GaussianActor(
             obs_dim, act_dim, hidden=tuple(cfg["actor_hidden"]),
             activation=cfg["actor_activation"], log_std_init=cfg["log_std_init"],
+            mean_init_scale=cfg["actor_mean_init_scale"],
         )
         self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
         if not self.inference_only:
@@ -100,7 +101,8 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
             temperature=cfg["temperature"], nu=self.nu, logp_weight=cfg["logp_weight"],
             start=cfg["langevin_start"],
             low=self._low if clamp else None, high=self._high if clamp else None,
-            grad_clip=cfg["langevin_grad_clip"], generator=generator,
+            grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
+            generator=generator,
         )
 
     # ----- RLlib APIs -----

@@ -40,9 +40,18 @@ class GaussianActor(nn.Module):
     """π_φ(a|s) = N(μ_φ(s), diag σ²) with a state-independent log σ; no tanh squashing [P, C]."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256),
-                 activation: str = "tanh", log_std_init: float = -0.5):
+                 activation: str = "tanh", log_std_init: float = -0.5,
+                 mean_init_scale: float | None = None):
         super().__init__()
         self.mean_net = mlp(obs_dim, tuple(hidden), act_dim, activation)
+        if mean_init_scale is not None:
+            # [C]: a small head makes the first policy act near 0 whatever the observation, so
+            # early data is not dominated by saturated actions. Scaling after nn.Linear's own
+            # init draws the same random numbers as the unscaled network.
+            head = self.mean_net[-1]
+            with torch.no_grad():
+                head.weight.mul_(mean_init_scale)
+                head.bias.zero_()
         self.log_std = nn.Parameter(torch.full((act_dim,), float(log_std_init)))
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

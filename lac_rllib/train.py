@@ -35,8 +35,14 @@ def parse_sets(pairs: list[str]) -> dict:
     return out
 
 
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0) -> LACConfig:
-    """The LACConfig a run uses (validated; no Ray needed)."""
+def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
+                 timesteps: int | None = None) -> LACConfig:
+    """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed).
+
+    The budget is the horizon of the learning-rate decay unless ``sets`` names another.
+    """
+    if timesteps is not None:
+        sets = {"total_env_steps": int(timesteps), **sets}
     config = LACConfig().task(task).training(**sets).debugging(seed=seed)
     config.env_runners(num_env_runners=num_env_runners)
     config.validate()
@@ -49,7 +55,10 @@ def _fmt(x) -> str:
 
 def train(config: LACConfig, timesteps: int, output: str, *, log=print) -> dict:
     """Train until ``timesteps`` env steps, checkpoint into ``output``, return the summary."""
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
     from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+    from lac_rllib.learner import REPORTED_KEYS
     from lac_rllib.tasks.versions import runtime_versions
 
     os.makedirs(output, exist_ok=True)
@@ -62,8 +71,11 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print) -> dict:
             while not result or result[ENV_STEPS] < timesteps:
                 result = algo.train()
                 row = {k: float(result[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
+                learner = result.get("learners", {}).get(DEFAULT_MODULE_ID, {})
+                row.update({k: float(learner[k]) for k in REPORTED_KEYS if k in learner})
                 row["iteration"], row["time_s"] = int(result["training_iteration"]), time.time() - start
                 progress.write(json.dumps(row) + "\n")
+                progress.flush()  # a run killed mid-way keeps every finished iteration
                 log(f"iter {row['iteration']:4d}  steps {int(row[ENV_STEPS]):8d}  return {_fmt(row[EPISODE_RETURN]):>8}"
                     f"  cost {_fmt(row[EPISODE_COST]):>7} / {_fmt(row[COST_LIMIT])}  nu {_fmt(row[NU]):>7}"
                     f"  {row['time_s']:7.1f}s", flush=True)
@@ -95,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--timesteps {args.timesteps} is invalid; accepted: an integer >= 1")
         if args.num_env_runners < 0:
             raise ValueError(f"--num-env-runners {args.num_env_runners} is invalid; accepted: an integer >= 0")
-        config = build_config(args.task, args.seed, parse_sets(args.set), args.num_env_runners)
+        config = build_config(args.task, args.seed, parse_sets(args.set), args.num_env_runners, args.timesteps)
     except ValueError as e:
         parser.exit(2, f"lac-train: error: {e}\n")
     import ray

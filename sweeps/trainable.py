@@ -18,11 +18,10 @@ import ray
 from ray import tune
 
 from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+from lac_rllib.learner import REPORTED_KEYS
 from lac_rllib.train import build_config
 from sweeps.tracking import CHECKPOINT_TAG, NODE_TAG, TrialTracker
 
-LEARNER_KEYS = ("critic_loss", "actor_loss", "actor_nll", "actor_kl", "q_reward_mean", "q_cost_mean",
-                "langevin_energy_drop", "langevin_displacement")
 INFEASIBLE_OFFSET = 1e6
 
 
@@ -45,9 +44,9 @@ class LACTrainable(tune.Trainable):
         self.spec = config
         overrides = {**config.get("budget_overrides", {}), **config.get("overrides", {}),
                      "torch_threads": int(config.get("cpus", 1))}
-        self.lac_config = build_config(config["task"], int(config["seed"]), overrides)
-        self.algo = self.lac_config.build_algo()
         self.timesteps = int(config["timesteps"])
+        self.lac_config = build_config(config["task"], int(config["seed"]), overrides, timesteps=self.timesteps)
+        self.algo = self.lac_config.build_algo()
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
                                     config.get("label") or f"search-{self.trial_name}")
@@ -80,7 +79,7 @@ class LACTrainable(tune.Trainable):
             r = self.algo.train()
             learner = r.get("learners", {}).get("default_policy", {})
             metrics = {k: float(r[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
-            metrics.update({k: float(learner[k]) for k in LEARNER_KEYS if k in learner})
+            metrics.update({k: float(learner[k]) for k in REPORTED_KEYS if k in learner})
             bad = [k for k in ("critic_loss", "actor_loss", NU) if k in metrics and not math.isfinite(metrics[k])]
             if bad:
                 raise FloatingPointError(f"non-finite {', '.join(bad)} at iteration {self.iteration + 1}")

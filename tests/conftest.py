@@ -18,9 +18,10 @@ def ray_session():
 
 
 def tiny_config(task="lac/PointHazard-v0", seed=0, **overrides):
-    """A LACConfig on a built-in task, sized for tests."""
+    """A LACConfig on a built-in task, sized for tests (lr decay over 10k steps unless given)."""
     from lac_rllib.config import LACConfig
 
+    overrides = {"total_env_steps": 10_000, **overrides}
     return LACConfig().task(task).training(**overrides).debugging(seed=seed)
 
 
@@ -46,6 +47,6 @@ def checkpoint(ray_session, tmp_path_factory):
 
     out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"
     config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
-                                                     "random_iterations": 1})
+                                                     "random_iterations": 1}, timesteps=1500)
     train(config, 1500, str(out), log=lambda *a, **k: None)
     return str(out / "checkpoint")

@@ -20,6 +20,12 @@ from lac_rllib.config import FIELD_NAMES, LACConfig, LACParams, field_docs
     ("actor_chain_at", "previous", "next | current"),
     ("cost_gamma", 1.5, "(0, 1]"),
     ("nu_lr", float("nan"), ">= 0"),
+    ("langevin_grad_clip_mode", "global", "batch | per_sample"),
+    ("lr_schedule", "cosine", "linear | constant"),
+    ("lr_final_fraction", 0.0, "(0, 1]"),
+    ("obs_std_floor", -1e-2, ">= 0"),
+    ("nu_max_adaptive", "yes", "True | False"),
+    ("total_env_steps", 0, "None or an integer >= 1"),
 ])
 def test_bad_values_name_field_and_accepted_range(field, value, accepted):
     with pytest.raises(ValueError) as err:
@@ -37,6 +43,11 @@ def test_spec_defaults_and_presets():
     assert (c.langevin_steps, c.langevin_step_size, c.temperature, c.beta) == (30, 1e-4, 1e-3, 0.0)
     assert (c.nu_lr, c.nu_init, c.polyak_tau, c.reward_scale, c.cost_gamma, c.gamma) == (0.01, 0.0, 0.005, 10.0, 0.99, 0.99)
     assert (c.replay_capacity, c.lac_minibatch_size, c.random_iterations) == (50_000, 256, 5)
+    # The authors' training dynamics (SPEC "Rule for defaults"): chain clip, ν bound, lr decay,
+    # head init, std floor, Polyak from the first actor update.
+    assert (c.langevin_grad_clip, c.langevin_grad_clip_mode, c.nu_max_adaptive) == (1000.0, "batch", True)
+    assert (c.lr_schedule, c.lr_final_fraction, c.actor_mean_init_scale) == ("linear", 0.5, 0.1)
+    assert (c.obs_std_floor, c.polyak_from_actor_start) == (1e-2, True)
     assert LACConfig().task("SafetyPointGoal1-v0").env_steps_per_iteration == 20_000  # Table 5
     assert LACConfig().task("focops/AntVelocity-v0").env_steps_per_iteration == 5_000  # Table 4
     assert LACConfig().task("SafetyPointButton1-v0").langevin_steps == 50  # Table 5, Button
@@ -72,3 +83,13 @@ def test_cli_rejects_bad_input_before_ray_starts(tmp_path, args, needle):
     assert proc.returncode == 2, proc.stderr
     assert needle in proc.stderr
     assert "Started a local Ray instance" not in proc.stderr + proc.stdout
+
+
+def test_linear_lr_decay_needs_the_budget():
+    config = LACConfig().task("lac/PointHazard-v0")
+    with pytest.raises(ValueError, match="total_env_steps=None .*lr_schedule='constant'"):
+        config.validate()
+    config.training(lr_schedule="constant").validate()
+    assert config.lr_or_schedule(3e-4) == 3e-4
+    config.training(lr_schedule="linear", total_env_steps=1000)
+    assert config.lr_or_schedule(3e-4) == [[0, 3e-4], [1000, 1.5e-4]]

@@ -1,6 +1,7 @@
 """Langevin chain (Algorithm 1, eq. 9/11): Theorem 3.1 on quadratics, equality of the efficient
 form with the naive autograd reference, and the chain's contracts (no parameter gradients,
-detached output, bounds, start distribution, per-sample gradient clip, argument validation)."""
+detached output, bounds, start distribution, the gradient clip's two modes, chain-health figures,
+argument validation)."""
 
 import math
 
@@ -101,7 +102,8 @@ def _nets(seed=0):
 @pytest.mark.parametrize("temperature", [1e-3, 0.1, 2.0])
 @pytest.mark.parametrize("bounded", [False, True])
 @pytest.mark.parametrize("start", ["informative", "noninformative"])
-def test_efficient_chain_equals_naive(temperature, bounded, start):
+@pytest.mark.parametrize("clip", [None, ("batch", 50.0), ("per_sample", 50.0)])
+def test_efficient_chain_equals_naive(temperature, bounded, start, clip):
     critics, actor, obs = _nets()
     steps, eta = 12, 1e-3
     noise = torch.randn(steps + 1, B, ACT, generator=torch.Generator().manual_seed(5), dtype=D64)
@@ -109,14 +111,18 @@ def test_efficient_chain_equals_naive(temperature, bounded, start):
         else dict(low=None, high=None)
     nu = torch.tensor(0.7, dtype=D64) if bounded else 0.7
     mean, log_std = actor(obs)
+    clip_kw = dict(grad_clip=clip[1], grad_clip_mode=clip[0]) if clip else {}
     fast = langevin_chain(critics, obs, mean, log_std, steps=steps, step_size=eta,
-                          temperature=temperature, nu=nu, start=start, noise=noise, **bounds)
+                          temperature=temperature, nu=nu, start=start, noise=noise, **bounds, **clip_kw)
     a0 = mean.detach() + log_std.detach().exp() * noise[0] if start == "informative" else noise[0]
     slow = naive_langevin_chain(critics, actor, obs, a0, steps=steps, step_size=eta,
                                 temperature=temperature, nu=nu, logp_weight=1.0,
-                                noise=noise[1:], **bounds)
-    for field in ("action", "energy_start", "energy_end", "displacement"):
+                                noise=noise[1:], **bounds, **clip_kw)
+    for field in ("action", "energy_start", "energy_end", "displacement", "grad_norm", "clip_fraction",
+                  "at_bound"):
         torch.testing.assert_close(getattr(fast, field), getattr(slow, field), rtol=1e-5, atol=1e-5)
+    if clip and temperature == 1e-3:
+        assert float(fast.clip_fraction) > 0  # at λ = 1e-3 the clip binds: it was exercised
     assert fast.displacement.min() > 0  # the chain actually moved
     if bounded:
         assert fast.action.abs().max() <= 1.0
@@ -161,21 +167,43 @@ def test_start_distribution(start):
     assert (res.action.std(0) - exp_std).abs().max() < 0.03 * exp_std
 
 
-def test_grad_clip_is_per_sample():
-    big = torch.tensor([[1e6, 0.0], [0.0, 0.0]], dtype=D64)
-    small = torch.tensor([[0.0, 0.0], [0.3, -0.4]], dtype=D64)
+def _one_step(grad0, **kw):
+    """One chain step from 0 with zero noise and gradient ``grad0``: ã₁ = −(η/2)·clip(∇)."""
+    noise = torch.zeros(1, *grad0.shape, dtype=D64)
+    return run_chain(lambda a: (a.sum(-1), grad0), torch.zeros_like(grad0), steps=1, step_size=2.0,
+                     noise=noise, **kw)
 
-    def grad_fn_with(g0):
-        return lambda a: (a.sum(-1), g0 + small)
 
-    noise = torch.zeros(1, 2, 2, dtype=D64)
-    a0 = torch.zeros(2, 2, dtype=D64)
-    kw = dict(steps=1, step_size=0.1, noise=noise, grad_clip=1.0)
-    calm = run_chain(grad_fn_with(torch.zeros(2, 2, dtype=D64)), a0, **kw).action
-    wild = run_chain(grad_fn_with(big), a0, **kw).action
-    torch.testing.assert_close(wild[1], calm[1])  # sample 1's step is untouched by sample 0
-    torch.testing.assert_close(wild[0], torch.tensor([-0.05, 0.0], dtype=D64))  # clipped to ‖g‖=1
-    torch.testing.assert_close(calm[1], -0.05 * small[1])  # below the clip: unchanged
+def test_batch_clip_is_one_norm_over_the_minibatch():
+    g = torch.tensor([[3.0, 4.0], [0.0, 12.0], [0.0, 0.0], [-84.0, 0.0]], dtype=D64)  # ‖g‖_F = 85
+    res = _one_step(g, grad_clip=17.0, grad_clip_mode="batch")
+    torch.testing.assert_close(res.action, -g * (17.0 / 85.0))  # every row shrunk by one factor
+    assert float(res.clip_fraction) == 1.0
+    assert float(res.grad_norm) == pytest.approx((5 + 12 + 0 + 84) / 4)  # mean per-sample, pre-clip
+    below = _one_step(g, grad_clip=85.5, grad_clip_mode="batch")
+    torch.testing.assert_close(below.action, -g)
+    assert float(below.clip_fraction) == 0.0
+
+
+def test_per_sample_clip_differs_where_samples_differ():
+    g = torch.tensor([[3.0, 4.0], [0.0, 12.0], [0.0, 0.0], [-84.0, 0.0]], dtype=D64)
+    res = _one_step(g, grad_clip=20.0, grad_clip_mode="per_sample")  # each row to 20/√4 = 10
+    torch.testing.assert_close(res.action[0], -g[0])                  # ‖5‖ < 10: untouched
+    torch.testing.assert_close(res.action[1], torch.tensor([0.0, -10.0], dtype=D64))
+    torch.testing.assert_close(res.action[3], torch.tensor([10.0, 0.0], dtype=D64))
+    assert float(res.clip_fraction) == pytest.approx(0.5)
+    batch = _one_step(g, grad_clip=20.0, grad_clip_mode="batch")
+    assert not torch.allclose(batch.action[0], res.action[0])  # the batch mode shrank row 0 too
+    # Alike rows: both modes give the same step (the per-sample bound is clip/√B).
+    same = g[1:2].expand(4, 2).clone()
+    torch.testing.assert_close(_one_step(same, grad_clip=20.0, grad_clip_mode="per_sample").action,
+                               _one_step(same, grad_clip=20.0, grad_clip_mode="batch").action)
+
+
+def test_at_bound_fraction():
+    g = torch.tensor([[-5.0, 0.0], [0.0, 0.1], [0.0, 0.0], [0.0, 3.0]], dtype=D64)
+    res = _one_step(g, low=-1.0, high=1.0)  # rows 0 (→ +5, clamped) and 3 (→ −3, clamped)
+    assert float(res.at_bound) == pytest.approx(0.5)
 
 
 def test_energy_decreases_from_informative_start():
@@ -195,6 +223,7 @@ def test_energy_decreases_from_informative_start():
     (dict(steps=0), "steps"), (dict(step_size=0.0), "step_size"),
     (dict(temperature=-1.0), "temperature"), (dict(start="uniform"), "start"),
     (dict(grad_clip=0.0), "grad_clip"), (dict(nu=-0.5), "nu"),
+    (dict(grad_clip=1.0, grad_clip_mode="global"), "grad_clip_mode"),
 ])
 def test_bad_arguments_raise(bad, field):
     critics, actor, obs = _nets()

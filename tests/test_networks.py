@@ -128,3 +128,13 @@ def test_gaussian_log_prob_and_kl_match_torch_distributions():
     ref = torch.distributions.kl_divergence(normal(mp, lp.exp()), normal(mq, lq.exp())).sum(-1)
     torch.testing.assert_close(gaussian_kl(mp, lp, mq, lq), ref)
     torch.testing.assert_close(gaussian_kl(mp, lp, mp, lp), torch.zeros(10, dtype=D64))
+
+
+def test_actor_mean_head_init_is_scaled_and_unbiased():
+    torch.manual_seed(3)
+    plain = GaussianActor(OBS, ACT, hidden=(32, 32))
+    torch.manual_seed(3)
+    small = GaussianActor(OBS, ACT, hidden=(32, 32), mean_init_scale=0.1)
+    torch.testing.assert_close(small.mean_net[-1].weight, 0.1 * plain.mean_net[-1].weight)
+    assert torch.count_nonzero(small.mean_net[-1].bias) == 0 and torch.count_nonzero(plain.mean_net[-1].bias) > 0
+    torch.testing.assert_close(small.mean_net[0].weight, plain.mean_net[0].weight)  # the body is untouched
