@@ -45,6 +45,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--resume", action="store_true", help="continue the sweep of the same name")
     p.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial (node loss)")
     p.add_argument("--optuna-seed", type=int, default=0, help="seed of the TPE sampler")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="set a LAC field in every trial (the swept value wins); e.g. nu_max_adaptive=False")
     return p.parse_args(argv)
 
 
@@ -67,6 +69,12 @@ def make_plan(args) -> dict:
         v = getattr(args, flag)
         if v is not None and v < 1:
             raise ValueError(f"--{flag.replace('_', '-')} {v} is invalid; accepted: an integer >= 1")
+    from lac_rllib.config import check_field
+    from lac_rllib.train import parse_sets
+
+    sets = parse_sets(args.set)  # unknown fields list the accepted ones
+    for field, value in sets.items():
+        check_field(field, value)
     check_address(args.address)
     uri = args.tracking_uri or default_tracking_uri()
     check_reachable(uri)
@@ -80,7 +88,7 @@ def make_plan(args) -> dict:
     name = args.name or f"{args.space}-{(task or 'paper').split('/')[-1]}-{args.budget}"
     return {
         "space": args.space, "task": task, "budget": args.budget, "timesteps": budget.timesteps,
-        "trials": trials, "n_trials": n_trials, "concurrency": min(concurrency, n_trials),
+        "trials": trials, "n_trials": n_trials, "concurrency": min(concurrency, n_trials), "sets": sets,
         "estimated_wall_s": per_trial * math.ceil(n_trials / min(concurrency, n_trials)),
         "tracking_uri": uri, "experiment": args.experiment, "name": name,
         "storage": str(Path(args.storage).resolve()) if "://" not in args.storage else args.storage,

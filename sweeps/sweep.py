@@ -46,7 +46,8 @@ def param_space(plan: dict, args, parent_run_id: str) -> dict:
         "timesteps": plan["timesteps"], "cpus": args.cpus_per_trial,
         "tracking": {"uri": plan["tracking_uri"], "experiment": plan["experiment"], "parent_run_id": parent_run_id},
     }
-    budget = spaces.BUDGETS[plan["budget"]].overrides
+    # The budget's overrides, then the user's --set, then what the trial sweeps.
+    budget = {**spaces.BUDGETS[plan["budget"]].overrides, **plan.get("sets", {})}
     if plan["trials"] is None:  # search: Optuna samples the LAC fields
         return {**common, "task": plan["task"], "seed": 0, "group": "search", "param": "", "value": None,
                 "budget_overrides": budget, "overrides": spaces.tune_search_space()}

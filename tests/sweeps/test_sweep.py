@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
+from lac_rllib.learner import CHAIN_HEALTH_KEYS
 from sweeps import run as cli
 from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
 
@@ -41,7 +42,7 @@ def _sweep(tmp_path, args, mutate=None):
 
 
 def test_smoke_sweep_end_to_end(ray_session, tmp_path):
-    assert _sweep(tmp_path, _args(tmp_path)) == 0
+    assert _sweep(tmp_path, _args(tmp_path, "--set", "obs_std_floor=0.05")) == 0
     client, parents, children = _runs(tmp_path)
     assert len(parents) == 1 and len(children) == 4
     parent = parents[0]
@@ -55,11 +56,15 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path):
     for c in children:
         assert c.info.status == "FINISHED" and c.data.tags["mlflow.parentRunId"] == parent.info.run_id
         assert {"task", "seed", "temperature", "beta", "langevin_start", "swept_param"} <= set(c.data.params)
+        assert float(c.data.params["obs_std_floor"]) == 0.05  # --set reaches every trial
         assert c.data.tags.get("lac.node_id")
         hist = client.get_metric_history(c.info.run_id, "episode_cost")
         assert [m.step for m in hist] == [500, 1000, 1500, 2000]
-        for key in ("episode_return", "cost_limit", "nu", "critic_loss", "actor_loss", "env_steps", "wall_time_s"):
+        for key in ("episode_return", "cost_limit", "nu", "critic_loss", "actor_loss", "env_steps", "wall_time_s",
+                    *CHAIN_HEALTH_KEYS, "nu_max", "target_reward_mean", "target_cost_mean"):
             assert len(client.get_metric_history(c.info.run_id, key)) == 4, key
+        at_bound = client.get_metric_history(c.info.run_id, "langevin_at_bound")
+        assert all(0.0 <= m.value <= 1.0 for m in at_bound)
         arts = {a.path for a in client.list_artifacts(c.info.run_id)}
         assert {"checkpoint", "config.json", "learning_curve.png"} <= arts
         assert client.list_artifacts(c.info.run_id, "checkpoint"), "checkpoint directory is empty"
@@ -149,6 +154,8 @@ def test_resume_after_driver_sigkill(tmp_path):
     (["--tracking-uri", "http://127.0.0.1:9"], "--tracking-uri http://127.0.0.1:9 is unreachable"),
     (["--address", "127.0.0.1:9"], "--address 127.0.0.1:9: cannot connect"),
     (["--address", "not an address"], "accepted: auto, HOST:PORT"),
+    (["--set", "nu_max_adaptive=2"], "nu_max_adaptive=2 is invalid; accepted: True | False"),
+    (["--set", "no_such_field=1"], "unknown LAC config field 'no_such_field'"),
 ])
 def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
     cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", *extra]

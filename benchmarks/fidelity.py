@@ -1,0 +1,261 @@
+"""Learning curves of LAC against the paper's numbers: the check for any change that can alter
+what the agent learns (defaults, numerics, sampling).
+
+    python benchmarks/fidelity.py --task SafetyPointGoal1-v0 --seeds 2 --timesteps 500000 \\
+        --variant new --variant "old:langevin_grad_clip=None,nu_max_adaptive=False" \\
+        --out docs/fidelity/pointgoal1
+
+Each (variant, seed) is one ``lac-train`` run (a subprocess, niced, one torch thread), at most
+``--parallel`` at a time (default: the CPUs). A variant is ``NAME`` or ``NAME:field=value,...``
+on top of the defaults and ``--set``. Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
+one line per iteration, and the report is rebuilt every ``--report-every`` seconds while runs go,
+so a run stopped mid-way (session end, Ctrl-C) leaves curves up to its last iteration;
+``--report-only`` rebuilds it from what is on disk. The report (in ``--out``):
+
+- ``curves.png``: return, cost (the limit drawn), ν and the chain's at-bound fraction against
+  env steps, one colour per variant, one line style per seed;
+- ``curves.csv``: every iteration of every run;
+- ``table.md``: per variant, the mean over the final 10% of each run's env steps, then mean ± std
+  over seeds, beside the paper's number for the task (SPEC §7, docs/fidelity/README.md) and,
+  for Safety-Gymnasium PointGoal1, OmniSafe's published SACLag/PPOLag. Runs are compared at
+  equal budget: every curve is cut at the smallest env-step count all runs reached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout
+
+# Published figures: reward / cost (mean ± std), with the budget they were reached at.
+PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (SPEC §7)
+    "SafetyPointGoal1-v0": ((14.20, 3.35), (22.21, 3.03)),
+    "SafetyCarGoal1-v0": ((24.01, 2.21), (22.15, 4.71)),
+    "SafetyPointButton1-v0": ((2.45, 1.36), (21.11, 6.74)),
+    "SafetyCarButton1-v0": ((1.50, 1.44), (16.54, 13.83)),
+    "focops/AntVelocity-v0": ((1940.71, 16.31), (103.04, 0.12)),
+    "focops/SwimmerVelocity-v0": ((34.56, 4.94), (24.45, 1.30)),
+    "focops/HumanoidVelocity-v0": ((5023.27, 107.99), (20.12, 0.58)),
+    "focops/HumanoidCircle-v0": ((925.03, 111.95), (49.57, 1.16)),
+}
+OMNISAFE = {  # OmniSafe's benchmark tables (cost limit 25)
+    "SafetyPointGoal1-v0": [("OmniSafe SACLag, 3M steps", (21.45, 6.97), (19.17, 9.72)),
+                            ("OmniSafe PPOLag, 10M steps", (12.96, 6.95), (25.80, 34.99)),
+                            ("unconstrained SAC (OmniSafe)", (27.04, None), (67.57, None))],
+}
+CURVE_KEYS = ("env_steps", "episode_return", "episode_cost", "cost_limit", "nu", "nu_max",
+              "langevin_at_bound", "langevin_clip_fraction", "langevin_grad_norm", "actor_std_mean",
+              "time_s")
+TAIL = 0.10  # the final 10% of the env steps
+
+
+def parse_variant(text: str) -> tuple[str, list[str]]:
+    """``"old:a=1,b=None"`` → ("old", ["a=1", "b=None"]); the sets are checked by lac-train's parser."""
+    from lac_rllib.train import parse_sets
+
+    name, _, sets = text.partition(":")
+    pairs = [p.strip() for p in sets.split(",") if p.strip()]
+    if not name or "/" in name:
+        raise ValueError(f"--variant {text!r}: expected NAME or NAME:field=value,...")
+    parse_sets(pairs)  # unknown fields fail here, before anything runs
+    return name, pairs
+
+
+def run_dir(out: Path, variant: str, seed: int) -> Path:
+    return out / "runs" / variant / f"seed{seed}"
+
+
+def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int, nice: int):
+    d = run_dir(out, variant, seed)
+    d.mkdir(parents=True, exist_ok=True)
+    (d / "progress.jsonl").unlink(missing_ok=True)  # a fresh run, not appended to an old one
+    cmd = [sys.executable, "-m", "lac_rllib.train", "--task", task, "--seed", str(seed),
+           "--timesteps", str(timesteps), "--output", str(d)]
+    for p in pairs:
+        cmd += ["--set", p]
+    (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]) + "\n")
+    log = open(d / "train.log", "w")
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(["nice", "-n", str(nice), *cmd], stdout=log, stderr=subprocess.STDOUT, env=env,
+                            cwd=ROOT, start_new_session=True)
+    # With autogroup scheduling (Linux's default), CPU is shared between sessions first and
+    # niceness only counts inside a session: a new session at nice 10 would still take an equal
+    # share against interactive work. Nice the session's group too, where the kernel has one.
+    try:
+        Path(f"/proc/{proc.pid}/autogroup").write_text(str(nice))
+    except OSError:
+        pass
+    return proc
+
+
+def load_curves(out: Path):
+    import pandas as pd
+
+    rows = []
+    for progress in sorted(out.glob("runs/*/seed*/progress.jsonl")):
+        variant, seed = progress.parent.parent.name, int(progress.parent.name[4:])
+        for line in progress.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                rows.append({"variant": variant, "seed": seed, "iteration": r["iteration"],
+                             **{k: r.get(k, math.nan) for k in CURVE_KEYS}})
+    return pd.DataFrame(rows)
+
+
+def _fmt(mean: float, std: float | None) -> str:
+    if mean is None or (isinstance(mean, float) and math.isnan(mean)):
+        return "–"
+    return f"{mean:.2f}" if std is None or math.isnan(std) else f"{mean:.2f} ± {std:.2f}"
+
+
+def final_table(df, task: str, order: list[str]) -> tuple[str, int]:
+    """Markdown table of the final 10% at the common budget; returns (markdown, common steps)."""
+    common = int(df.groupby(["variant", "seed"])["env_steps"].max().min())
+    cut = df[df["env_steps"] <= common]
+    lines = [f"Compared at {common:,} env steps (the fewest any run reached); each run's score is the mean "
+             f"over its iterations in the final {TAIL:.0%} of that budget (env steps > {int(common * (1 - TAIL)):,}),"
+             " then mean ± std over seeds. Return and cost are means over the episodes completed in an iteration.",
+             "", "| configuration | seeds | return | cost | ν | chain end points at a bound | per-seed return / cost |",
+             "|---|---|---|---|---|---|---|"]
+    for variant in order:
+        runs = cut[cut["variant"] == variant]
+        if runs.empty:
+            continue
+        per_seed = []
+        for seed, run in runs.groupby("seed"):
+            tail = run[run["env_steps"] > common * (1 - TAIL)]
+            per_seed.append((seed, tail["episode_return"].mean(), tail["episode_cost"].mean(), tail["nu"].mean(),
+                             tail["langevin_at_bound"].mean()))
+        import numpy as np
+
+        cols = np.array([p[1:] for p in per_seed], dtype=float)
+        mean, std = cols.mean(0), cols.std(0, ddof=1) if len(cols) > 1 else [math.nan] * 4
+        seeds = ", ".join(f"s{p[0]}: {p[1]:.2f} / {p[2]:.1f}" for p in per_seed)
+        lines.append(f"| {variant} | {len(per_seed)} | {_fmt(mean[0], std[0])} | {_fmt(mean[1], std[1])} | "
+                     f"{_fmt(mean[2], std[2])} | {_fmt(mean[3], std[3])} | {seeds} |")
+    limit = float(df["cost_limit"].iloc[0])
+    if task in PAPER:
+        (r, rs), (c, cs) = PAPER[task]
+        lines.append(f"| paper LAC, 2.5M steps | 10 | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
+    for name, (r, rs), (c, cs) in OMNISAFE.get(task, []):
+        lines.append(f"| {name} | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
+    lines += ["", f"Cost limit {limit:g}."]
+    return "\n".join(lines), common
+
+
+def plot(df, task: str, order: list[str], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [("episode_return", "episode return"), ("episode_cost", "episode cost"), ("nu", "ν"),
+              ("langevin_at_bound", "chain end points at a bound")]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    styles = ["-", "--", ":", "-."]
+    for ax, (key, title) in zip(axes, panels):
+        for vi, variant in enumerate(order):
+            for si, (seed, run) in enumerate(df[df["variant"] == variant].groupby("seed")):
+                ax.plot(run["env_steps"] / 1e3, run[key], styles[si % len(styles)], color=colours[vi % len(colours)],
+                        lw=1.3, label=f"{variant} s{seed}")
+        if key == "episode_cost":
+            ax.axhline(float(df["cost_limit"].iloc[0]), color="k", lw=1, ls="--", label="cost limit")
+        ax.set_title(title)
+        ax.set_xlabel("env steps (k)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(task)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def report(out: Path, task: str, order: list[str], timesteps: int | None) -> str | None:
+    df = load_curves(out)
+    if df.empty:
+        return None
+    order = [*order, *sorted(set(df["variant"]) - set(order))]  # runs of other invocations too
+    df.to_csv(out / "curves.csv", index=False)
+    plot(df, task, order, out / "curves.png")
+    table, common = final_table(df, task, order)
+    commands = sorted(p.read_text().strip() for p in out.glob("runs/*/seed*/command.txt"))
+    reached = df.groupby(["variant", "seed"]).agg(steps=("env_steps", "max"), hours=("time_s", "max"))
+    budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
+                       for (v, s), r in reached.iterrows())
+    text = (f"# {task}: LAC learning curves\n\n"
+            f"Budget asked: {timesteps or 'see the commands'} env steps per run; reached:\n{budget}\n\n"
+            f"{table}\n\n![curves](curves.png)\n\nCommands:\n\n```\n" + "\n".join(commands) + "\n```\n")
+    (out / "table.md").write_text(text)
+    return text
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--task", required=True)
+    parser.add_argument("--seeds", type=int, default=2, help="seeds 0..N-1 per variant")
+    parser.add_argument("--seed-list", default=None, help="explicit comma-separated seeds (overrides --seeds)")
+    parser.add_argument("--timesteps", type=int, default=500_000)
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="for every variant")
+    parser.add_argument("--variant", action="append", default=[], metavar="NAME[:F=V,...]",
+                        help="a configuration to run (repeatable; default: one variant 'defaults')")
+    parser.add_argument("--out", required=True, help="report directory (e.g. docs/fidelity/pointgoal1)")
+    parser.add_argument("--parallel", type=int, default=os.cpu_count(), help="runs at a time")
+    parser.add_argument("--nice", type=int, default=10, help="niceness of the runs (Ray's workers use 15)")
+    parser.add_argument("--report-every", type=float, default=120.0, help="seconds between report rebuilds")
+    parser.add_argument("--report-only", action="store_true", help="rebuild the report from runs on disk")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    try:
+        from lac_rllib.tasks import get_task
+        from lac_rllib.train import parse_sets
+
+        get_task(args.task)
+        parse_sets(args.set)
+        variants = [parse_variant(v) for v in args.variant or ["defaults"]]
+        if len({v for v, _ in variants}) != len(variants):
+            raise ValueError("--variant names must be distinct")
+        seeds = [int(s) for s in args.seed_list.split(",")] if args.seed_list else list(range(args.seeds))
+        if not seeds or args.timesteps < 1 or args.parallel < 1:
+            raise ValueError("need at least one seed, --timesteps >= 1 and --parallel >= 1")
+    except ValueError as e:
+        parser.exit(2, f"fidelity: error: {e}\n")
+    order = [v for v, _ in variants]
+    out.mkdir(parents=True, exist_ok=True)
+    if args.report_only:
+        print(report(out, args.task, order, None) or "no runs on disk")
+        return 0
+    queue = [(v, pairs, s) for s in seeds for v, pairs in variants]  # seed-major: every variant gets seed 0 first
+    running: list = []
+    last = time.time()
+    print(f"{len(queue)} runs of {args.timesteps:,} env steps on {args.task}, {args.parallel} at a time -> {out}")
+    try:
+        while queue or running:
+            while queue and len(running) < args.parallel:
+                v, pairs, s = queue.pop(0)
+                running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.nice)))
+                print(f"started {v} seed {s}", flush=True)
+            time.sleep(5)
+            for item in [r for r in running if r[2].poll() is not None]:
+                running.remove(item)
+                print(f"finished {item[0]} seed {item[1]} (exit {item[2].returncode})", flush=True)
+            if time.time() - last > args.report_every:
+                report(out, args.task, order, args.timesteps)
+                last = time.time()
+    except KeyboardInterrupt:
+        for *_, proc in running:
+            os.killpg(proc.pid, 15)
+    print(report(out, args.task, order, args.timesteps) or "no runs produced a curve")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
