@@ -8,9 +8,11 @@ what the agent learns (defaults, numerics, sampling).
 Each (variant, seed) is one ``lac-train`` run (a subprocess, niced, one torch thread), at most
 ``--parallel`` at a time (default: the CPUs). A variant is ``NAME`` or ``NAME:field=value,...``
 on top of the defaults and ``--set``. Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
-one line per iteration, and the report is rebuilt every ``--report-every`` seconds while runs go,
-so a run stopped mid-way (session end, Ctrl-C) leaves curves up to its last iteration;
-``--report-only`` rebuilds it from what is on disk. The report (in ``--out``):
+one line per iteration and a checkpoint every 5 iterations, and the report is rebuilt every
+``--report-every`` seconds while runs go, so a run stopped mid-way (session end, Ctrl-C) leaves
+curves up to its last iteration; ``--resume`` continues such runs from their checkpoints (the same
+command plus ``--resume``) and ``--report-only`` rebuilds the report from what is on disk. The
+report (in ``--out``):
 
 - ``curves.png``: return, cost (the limit drawn), ν and the chain's at-bound fraction against
   env steps, one colour per variant, one line style per seed;
@@ -73,16 +75,23 @@ def run_dir(out: Path, variant: str, seed: int) -> Path:
     return out / "runs" / variant / f"seed{seed}"
 
 
-def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int, nice: int):
+def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int, nice: int,
+           resume: bool = False):
+    from lac_rllib.train import resumable_checkpoint
+
     d = run_dir(out, variant, seed)
     d.mkdir(parents=True, exist_ok=True)
-    (d / "progress.jsonl").unlink(missing_ok=True)  # a fresh run, not appended to an old one
     cmd = [sys.executable, "-m", "lac_rllib.train", "--task", task, "--seed", str(seed),
            "--timesteps", str(timesteps), "--output", str(d)]
+    if resume and resumable_checkpoint(str(d)):
+        cmd.append("--resume")  # lac-train checks that the settings are the run's
+    else:
+        for name in ("progress.jsonl", "config.json"):
+            (d / name).unlink(missing_ok=True)  # a fresh run, not mixed with an old one
     for p in pairs:
         cmd += ["--set", p]
-    (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]) + "\n")
-    log = open(d / "train.log", "w")
+    (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]).replace(" --resume", "") + "\n")
+    log = open(d / "train.log", "a" if "--resume" in cmd else "w")
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     proc = subprocess.Popen(["nice", "-n", str(nice), *cmd], stdout=log, stderr=subprocess.STDOUT, env=env,
                             cwd=ROOT, start_new_session=True)
@@ -212,6 +221,8 @@ def main(argv=None) -> int:
     parser.add_argument("--nice", type=int, default=10, help="niceness of the runs (Ray's workers use 15)")
     parser.add_argument("--report-every", type=float, default=120.0, help="seconds between report rebuilds")
     parser.add_argument("--report-only", action="store_true", help="rebuild the report from runs on disk")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue runs from their latest checkpoint (lac-train --resume); runs at the budget are skipped")
     args = parser.parse_args(argv)
     out = Path(args.out)
     try:
@@ -234,6 +245,11 @@ def main(argv=None) -> int:
         print(report(out, args.task, order, None) or "no runs on disk")
         return 0
     queue = [(v, pairs, s) for s in seeds for v, pairs in variants]  # seed-major: every variant gets seed 0 first
+    if args.resume:
+        done = load_curves(out)
+        if not done.empty:
+            reached = done.groupby(["variant", "seed"])["env_steps"].max()
+            queue = [q for q in queue if reached.get((q[0], q[2]), 0) < args.timesteps]
     running: list = []
     last = time.time()
     print(f"{len(queue)} runs of {args.timesteps:,} env steps on {args.task}, {args.parallel} at a time -> {out}")
@@ -241,7 +257,8 @@ def main(argv=None) -> int:
         while queue or running:
             while queue and len(running) < args.parallel:
                 v, pairs, s = queue.pop(0)
-                running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.nice)))
+                running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.nice,
+                                             args.resume)))
                 print(f"started {v} seed {s}", flush=True)
             time.sleep(5)
             for item in [r for r in running if r[2].poll() is not None]:

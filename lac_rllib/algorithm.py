@@ -37,6 +37,8 @@ EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU = (
 EPISODES_THIS_ITER, ENV_STEPS = "episodes_this_iter", "env_steps"
 #: Version of the LAC keys in a checkpoint's rllib_checkpoint.json (see LAC.get_metadata).
 CHECKPOINT_FORMAT = 1
+#: Key of the replay buffer in the algorithm's checkpointed state (config.store_replay_buffer).
+REPLAY_BUFFER = "lac_replay_buffer"
 
 
 def make_task_env(env_config, task_id: str):
@@ -78,6 +80,17 @@ class LAC(Algorithm):
         super().setup(config)
         self.replay_buffer = EpisodeReplayBuffer(capacity=self.config.replay_capacity)
         self._last_episode_stats = (float("nan"), float("nan"))
+
+    def get_state(self, components=None, *, not_components=None, **kwargs) -> dict:
+        state = super().get_state(components, not_components=not_components, **kwargs)
+        if self.config.store_replay_buffer and self._check_component(REPLAY_BUFFER, components, not_components):
+            state[REPLAY_BUFFER] = self.replay_buffer.get_state()
+        return state
+
+    def set_state(self, state: dict) -> None:
+        super().set_state(state)
+        if REPLAY_BUFFER in state:
+            self.replay_buffer.set_state(state[REPLAY_BUFFER])
 
     def training_step(self) -> None:
         cfg = self.config

@@ -125,6 +125,10 @@ class LACParams:
     obs_std_floor: float = 1e-2
     """The filter divides by max(std, obs_std_floor) [C], so a near-constant observation
     dimension is not blown up to ±obs_clip; 0 = RLlib's std + 1e-8."""
+    store_replay_buffer: bool = True
+    """Keep the replay buffer in checkpoints [D; RLlib's store_buffer_in_checkpoints], so a resumed
+    or retried run trains on the data it had, not on an empty buffer; False keeps checkpoints
+    small (a full PointGoal1 buffer is tens of MB)."""
     torch_threads: int = 1
     """Intra-op torch threads of the learner process [D]: minibatch tensors are small, and on a
     shared 2-core machine 2 threads made one critic-gradient op ~250x slower than 1 (measured).
@@ -217,7 +221,7 @@ def check_field(name: str, value: Any) -> None:
     ):
         bad("None or an integer >= 1")
     if name in ("nu_max_adaptive", "polyak_from_actor_start", "langevin_clamp", "obs_normalization",
-                "bootstrap_on_truncation") and not isinstance(value, bool):
+                "bootstrap_on_truncation", "store_replay_buffer") and not isinstance(value, bool):
         bad("True | False")
     if name in ("actor_hidden", "critic_hidden") and not (
         len(tuple(value)) >= 1 and all(isinstance(h, int) and h >= 1 for h in value)

@@ -2,6 +2,8 @@
 
 Prints one progress line per iteration and, as the last line of stdout, one JSON object with
 the final metrics and the checkpoint path. Every argument is checked before Ray starts.
+``progress.jsonl`` gets one line per iteration as it ends; a checkpoint (replay buffer included)
+is written every ``--checkpoint-every`` iterations, and ``--resume`` continues a stopped run.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import ast
 import json
 import math
 import os
+import shutil
 import sys
 import time
 
@@ -53,8 +56,61 @@ def _fmt(x) -> str:
     return "nan" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.3g}"
 
 
-def train(config: LACConfig, timesteps: int, output: str, *, log=print) -> dict:
-    """Train until ``timesteps`` env steps, checkpoint into ``output``, return the summary."""
+CHECKPOINT, PROGRESS, CONFIG = "checkpoint", "progress.jsonl", "config.json"
+
+
+def run_config(config: LACConfig) -> dict:
+    """What ``config.json`` in a run's output holds (and what ``--resume`` compares)."""
+    return json.loads(json.dumps({"task": config.task_id, "seed": config.seed, **config.lac_params()}, default=str))
+
+
+def resumable_checkpoint(output: str) -> str | None:
+    """The run's latest complete checkpoint. ``_save`` removes the old one only after the new one
+    is written, so a lone ``checkpoint.new`` is complete."""
+    for name in (CHECKPOINT, CHECKPOINT + ".new"):
+        path = os.path.abspath(os.path.join(output, name))
+        if os.path.isdir(path):
+            return path
+    return None
+
+
+def check_output(output: str, config: LACConfig, resume: bool) -> None:
+    """Refuse to mix runs in one output directory (before Ray starts)."""
+    progress = os.path.join(output, PROGRESS)
+    if not resume:
+        if os.path.exists(progress):
+            raise ValueError(f"--output {output} holds a run already ({PROGRESS}); pass --resume to continue it "
+                             "or choose another --output")
+        return
+    if resumable_checkpoint(output) is None or not os.path.exists(os.path.join(output, CONFIG)):
+        raise ValueError(f"--resume: no checkpoint in {output} to continue from")
+    with open(os.path.join(output, CONFIG)) as f:
+        old = json.load(f)
+    new = run_config(config)
+    diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k))
+    if diff:
+        raise ValueError("--resume: the run in {} was started with other settings: {}".format(
+            output, ", ".join(f"{k}={old.get(k)!r} (now {new.get(k)!r})" for k in diff)))
+
+
+def _save(algo, output: str) -> str:
+    final = os.path.abspath(os.path.join(output, CHECKPOINT))
+    tmp = final + ".new"
+    shutil.rmtree(tmp, ignore_errors=True)
+    algo.save_to_path(tmp)
+    shutil.rmtree(final, ignore_errors=True)  # a kill from here on leaves checkpoint.new, complete
+    os.rename(tmp, final)
+    return final
+
+
+def train(config: LACConfig, timesteps: int, output: str, *, log=print, checkpoint_every: int = 0,
+          resume: bool = False) -> dict:
+    """Train until ``timesteps`` env steps, checkpoint into ``output``, return the summary.
+
+    Checkpoints (replay buffer included, ``store_replay_buffer``) every ``checkpoint_every``
+    iterations (0: only at the end). ``resume`` restores the latest one and continues: iterations
+    after it are dropped from ``progress.jsonl`` and trained again.
+    """
     from ray.rllib.core import DEFAULT_MODULE_ID
 
     from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
@@ -62,12 +118,22 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print) -> dict:
     from lac_rllib.tasks.versions import runtime_versions
 
     os.makedirs(output, exist_ok=True)
-    with open(os.path.join(output, "config.json"), "w") as f:
-        json.dump({"task": config.task_id, "seed": config.seed, **config.lac_params()}, f, indent=2, default=str)
+    check_output(output, config, resume)
+    with open(os.path.join(output, CONFIG), "w") as f:
+        json.dump(run_config(config), f, indent=2)
     algo = config.build_algo()
-    start, result = time.time(), {}
+    start, result, rows = time.time(), {}, []
+    if resume:
+        algo.restore_from_path(resumable_checkpoint(output))
+        with open(os.path.join(output, PROGRESS)) as f:
+            rows = [r for r in map(json.loads, filter(str.strip, f)) if r["iteration"] <= algo.iteration]
+        start -= rows[-1]["time_s"] if rows else 0.0
+        result = {ENV_STEPS: rows[-1][ENV_STEPS]} if rows else {}
+        log(f"resumed at iteration {algo.iteration} from {resumable_checkpoint(output)}")
     try:
-        with open(os.path.join(output, "progress.jsonl"), "a") as progress:
+        with open(os.path.join(output, PROGRESS), "w") as progress:
+            progress.writelines(json.dumps(r) + "\n" for r in rows)
+            progress.flush()
             while not result or result[ENV_STEPS] < timesteps:
                 result = algo.train()
                 row = {k: float(result[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
@@ -79,7 +145,9 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print) -> dict:
                 log(f"iter {row['iteration']:4d}  steps {int(row[ENV_STEPS]):8d}  return {_fmt(row[EPISODE_RETURN]):>8}"
                     f"  cost {_fmt(row[EPISODE_COST]):>7} / {_fmt(row[COST_LIMIT])}  nu {_fmt(row[NU]):>7}"
                     f"  {row['time_s']:7.1f}s", flush=True)
-        checkpoint = algo.save_to_path(os.path.abspath(os.path.join(output, "checkpoint")))
+                if checkpoint_every and row["iteration"] % checkpoint_every == 0 and row[ENV_STEPS] < timesteps:
+                    _save(algo, output)
+        checkpoint = _save(algo, output)
     finally:
         algo.stop()
     return {**{k: row[k] for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, NU)},
@@ -101,20 +169,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output", required=True, help="directory for the checkpoint and logs")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a LAC config field")
     parser.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0 = sample in the driver)")
+    parser.add_argument("--checkpoint-every", type=int, default=5,
+                        help="iterations between checkpoints, replay buffer included (0 = only at the end)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the run in --output from its latest checkpoint (same settings)")
     args = parser.parse_args(argv)
     try:
         if args.timesteps < 1:
             raise ValueError(f"--timesteps {args.timesteps} is invalid; accepted: an integer >= 1")
+        if args.checkpoint_every < 0:
+            raise ValueError(f"--checkpoint-every {args.checkpoint_every} is invalid; accepted: an integer >= 0")
         if args.num_env_runners < 0:
             raise ValueError(f"--num-env-runners {args.num_env_runners} is invalid; accepted: an integer >= 0")
         config = build_config(args.task, args.seed, parse_sets(args.set), args.num_env_runners, args.timesteps)
+        check_output(args.output, config, args.resume)
     except ValueError as e:
         parser.exit(2, f"lac-train: error: {e}\n")
     import ray
 
     ray.init(num_cpus=max(2, args.num_env_runners + 1), include_dashboard=False, log_to_driver=False,
              configure_logging=True, logging_level="ERROR")
-    summary = train(config, args.timesteps, args.output)
+    summary = train(config, args.timesteps, args.output, checkpoint_every=args.checkpoint_every, resume=args.resume)
     print(json.dumps(summary, default=str), flush=True)
     return 0
 

@@ -119,6 +119,7 @@ def test_checkpoint_round_trip(ray_session, tmp_path):
             act_before = algo.get_module().actor(obs)[0]
         nu_before = float(algo.get_module().nu)
         iteration = algo.iteration
+        buffer_before = [(e.id_, e.get_observations().copy()) for e in algo.replay_buffer.episodes]
     finally:
         algo.stop()
     assert nu_before > 0, "the test needs a non-trivial ν"
@@ -133,6 +134,12 @@ def test_checkpoint_round_trip(ray_session, tmp_path):
         assert any("optimizer" in k for k in _flat(after)), "optimizer state must be checkpointed"
         assert float(restored.get_module().nu) == nu_before
         assert restored.iteration == iteration
+        # The replay buffer is part of the checkpoint: a resumed run trains on the data it had.
+        buffer_after = [(e.id_, e.get_observations()) for e in restored.replay_buffer.episodes]
+        assert len(buffer_after) == len(buffer_before) > 0
+        for (id_a, obs_a), (id_b, obs_b) in zip(buffer_before, buffer_after):
+            assert id_a == id_b
+            np.testing.assert_array_equal(obs_a, obs_b)
         assert restored.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME)) == steps
         with torch.no_grad():
             torch.testing.assert_close(restored.get_module().actor(obs)[0], act_before, rtol=0, atol=0)

@@ -1,0 +1,60 @@
+"""lac-train: the command as a user runs it (tiny budget), and stop → resume of a run."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from lac_rllib.train import PROGRESS, build_config, train
+
+TINY = ["--set", "env_steps_per_iteration=500", "--set", "replay_capacity=2000", "--set", "random_iterations=1"]
+
+
+def _lac_train(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "lac_rllib.train", "--task", "lac/PointHazard-v0", *args],
+                          cwd=cwd, capture_output=True, text=True, timeout=600)
+
+
+def test_lac_train_command_runs_and_refuses_to_mix_runs(tmp_path):
+    out = tmp_path / "run"
+    proc = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert summary["env_steps"] == 1000 and summary["iterations"] == 2 and summary["task"] == "lac/PointHazard-v0"
+    assert (out / "checkpoint" / "rllib_checkpoint.json").exists()
+    rows = [json.loads(line) for line in (out / PROGRESS).read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [1, 2] and "langevin_at_bound" in rows[-1]
+    # The same output again without --resume: refused before Ray starts, nothing appended.
+    again = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, cwd=tmp_path)
+    assert again.returncode == 2 and "pass --resume" in again.stderr
+    assert "Started a local Ray instance" not in again.stdout + again.stderr
+    # --resume with other settings names the difference.
+    other = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, "--set", "beta=1.0", "--resume", cwd=tmp_path)
+    assert other.returncode == 2 and "beta=0.0 (now 1.0)" in other.stderr
+    assert len((out / PROGRESS).read_text().splitlines()) == 2
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_a_stopped_run_resumes_from_its_last_checkpoint(ray_session, tmp_path):
+    out = str(tmp_path / "run")
+    config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+                                                     "random_iterations": 1}, timesteps=2500)
+
+    def stop_at_iteration_4(line, **_):
+        if line.startswith("iter    4"):
+            raise _Stop  # as a kill would: after iteration 4's progress line, before its checkpoint
+
+    with pytest.raises(_Stop):
+        train(config, 2500, out, log=stop_at_iteration_4, checkpoint_every=3)
+    assert len((tmp_path / "run" / PROGRESS).read_text().splitlines()) == 4
+    summary = train(config, 2500, out, log=lambda *a, **k: None, resume=True)
+    rows = [json.loads(line) for line in (tmp_path / "run" / PROGRESS).read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [1, 2, 3, 4, 5]  # iteration 4 was trained again, logged once
+    assert [r["env_steps"] for r in rows] == [500, 1000, 1500, 2000, 2500]
+    assert summary["env_steps"] == 2500 and summary["iterations"] == 5
+    assert all(rows[i]["time_s"] < rows[i + 1]["time_s"] for i in range(4))
+
