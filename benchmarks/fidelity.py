@@ -8,7 +8,7 @@ what the agent learns (defaults, numerics, sampling).
 Each (variant, seed) is one ``lac-train`` run (a subprocess, niced, one torch thread), at most
 ``--parallel`` at a time (default: the CPUs). A variant is ``NAME`` or ``NAME:field=value,...``
 on top of the defaults and ``--set``. Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
-one line per iteration and a checkpoint every 5 iterations, and the report is rebuilt every
+one line per iteration and a checkpoint every ``--checkpoint-every`` iterations, and the report is rebuilt every
 ``--report-every`` seconds while runs go, so a run stopped mid-way (session end, Ctrl-C) leaves
 curves up to its last iteration; ``--resume`` continues such runs from their checkpoints (the same
 command plus ``--resume``) and ``--report-only`` rebuilds the report from what is on disk. The
@@ -76,13 +76,13 @@ def run_dir(out: Path, variant: str, seed: int) -> Path:
 
 
 def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int, nice: int,
-           resume: bool = False):
+           resume: bool = False, checkpoint_every: int = 2):
     from lac_rllib.train import resumable_checkpoint
 
     d = run_dir(out, variant, seed)
     d.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", "lac_rllib.train", "--task", task, "--seed", str(seed),
-           "--timesteps", str(timesteps), "--output", str(d)]
+           "--timesteps", str(timesteps), "--output", str(d), "--checkpoint-every", str(checkpoint_every)]
     if resume and resumable_checkpoint(str(d)):
         cmd.append("--resume")  # lac-train checks that the settings are the run's
     else:
@@ -219,10 +219,13 @@ def main(argv=None) -> int:
     parser.add_argument("--out", required=True, help="report directory (e.g. docs/fidelity/pointgoal1)")
     parser.add_argument("--parallel", type=int, default=os.cpu_count(), help="runs at a time")
     parser.add_argument("--nice", type=int, default=10, help="niceness of the runs (Ray's workers use 15)")
+    parser.add_argument("--checkpoint-every", type=int, default=2,
+                        help="iterations between a run's checkpoints (what --resume continues from)")
     parser.add_argument("--report-every", type=float, default=120.0, help="seconds between report rebuilds")
     parser.add_argument("--report-only", action="store_true", help="rebuild the report from runs on disk")
     parser.add_argument("--resume", action="store_true",
-                        help="continue runs from their latest checkpoint (lac-train --resume); runs at the budget are skipped")
+                        help="continue runs from their latest checkpoint (lac-train --resume); "
+                             "runs at the budget are skipped")
     args = parser.parse_args(argv)
     out = Path(args.out)
     try:
@@ -235,8 +238,8 @@ def main(argv=None) -> int:
         if len({v for v, _ in variants}) != len(variants):
             raise ValueError("--variant names must be distinct")
         seeds = [int(s) for s in args.seed_list.split(",")] if args.seed_list else list(range(args.seeds))
-        if not seeds or args.timesteps < 1 or args.parallel < 1:
-            raise ValueError("need at least one seed, --timesteps >= 1 and --parallel >= 1")
+        if not seeds or args.timesteps < 1 or args.parallel < 1 or args.checkpoint_every < 1:
+            raise ValueError("need at least one seed, --timesteps, --parallel and --checkpoint-every >= 1")
     except ValueError as e:
         parser.exit(2, f"fidelity: error: {e}\n")
     order = [v for v, _ in variants]
@@ -258,7 +261,7 @@ def main(argv=None) -> int:
             while queue and len(running) < args.parallel:
                 v, pairs, s = queue.pop(0)
                 running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.nice,
-                                             args.resume)))
+                                             args.resume, args.checkpoint_every)))
                 print(f"started {v} seed {s}", flush=True)
             time.sleep(5)
             for item in [r for r in running if r[2].poll() is not None]:

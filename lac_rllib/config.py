@@ -158,7 +158,10 @@ def field_docs() -> dict[str, str]:
 # Table 4 (MuJoCo) and Table 5 (Safety Gym). "tiny" [D] sizes lac/PointHazard-v0 to learn in
 # about a minute on 2 cores: small nets, short chains, and α_ν = 0.03 because its cost limit (2)
 # is ten times smaller than Safety Gym's (25); with 0.01 ν took ~40k steps to matter, with 0.1 it
-# overshot and the agent froze (measured on seeds 0 and 1).
+# overshot and the agent froze (measured on seeds 0 and 1). No chain clip: a T = 10 chain under
+# the batch-wide clip of 1000 is clipped at every step and moves an action ~0.08, and in 45k steps
+# nothing is learned (seed 0: return −9.5, random −10.1); unclipped, the same run ends at return
+# −0.9 and cost 0 (limit 2). The clip's effect at the paper's sizes is in docs/fidelity/.
 PRESETS: dict[str, dict[str, Any]] = {
     "mujoco": {"env_steps_per_iteration": 5000},
     "safety_gym": {"env_steps_per_iteration": 20_000},
@@ -170,6 +173,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "critic_hidden": (64, 64),
         "random_iterations": 2,
         "nu_lr": 0.03,
+        "langevin_grad_clip": None,
     },
 }
 
@@ -204,7 +208,9 @@ def check_field(name: str, value: Any) -> None:
         bad("a number in (0, 1]")
     if name in ("polyak_tau", "lr_final_fraction") and not (real(value) and 0 < value <= 1):
         bad("a number in (0, 1]")
-    if name in ("langevin_grad_clip", "actor_grad_clip", "actor_mean_init_scale") and value is not None and not (real(value) and value > 0):
+    if name in ("langevin_grad_clip", "actor_grad_clip", "actor_mean_init_scale") and value is not None and not (
+        real(value) and value > 0
+    ):
         bad("None or a finite number > 0")
     if name == "cost_limit" and value is not None and not (real(value) and value >= 0):
         bad("None or a finite number >= 0")

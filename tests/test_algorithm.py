@@ -150,7 +150,8 @@ def test_checkpoint_round_trip(ray_session, tmp_path):
 
 def _optimizer_lrs(algo) -> dict:
     learner = algo.learner_group._learner
-    return {name: float(optim.param_groups[0]["lr"]) for name, optim in learner.get_optimizers_for_module(DEFAULT_MODULE_ID)}
+    optimizers = learner.get_optimizers_for_module(DEFAULT_MODULE_ID)
+    return {name: float(optim.param_groups[0]["lr"]) for name, optim in optimizers}
 
 
 @pytest.mark.parametrize("schedule", ["linear", "constant"])
@@ -223,7 +224,8 @@ def test_same_seed_same_run(ray_session):
                            actor_update_start_iteration=0).build_algo()
         try:
             results = [algo.train() for _ in range(2)]
-            state = {k: v.detach().clone() for k, v in algo.learner_group._learner.module[DEFAULT_MODULE_ID].state_dict().items()}
+            module = algo.learner_group._learner.module[DEFAULT_MODULE_ID]
+            state = {k: v.detach().clone() for k, v in module.state_dict().items()}
         finally:
             algo.stop()
         return [(r["nu"], r["episode_return"], r["episode_cost"]) for r in results], state

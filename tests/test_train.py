@@ -30,7 +30,8 @@ def test_lac_train_command_runs_and_refuses_to_mix_runs(tmp_path):
     assert again.returncode == 2 and "pass --resume" in again.stderr
     assert "Started a local Ray instance" not in again.stdout + again.stderr
     # --resume with other settings names the difference.
-    other = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, "--set", "beta=1.0", "--resume", cwd=tmp_path)
+    other = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, "--set", "beta=1.0", "--resume",
+                       cwd=tmp_path)
     assert other.returncode == 2 and "beta=0.0 (now 1.0)" in other.stderr
     assert len((out / PROGRESS).read_text().splitlines()) == 2
 
