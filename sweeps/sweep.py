@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import platform
 import tempfile
 from pathlib import Path
@@ -26,8 +27,12 @@ class ConstrainedOptunaSearch(OptunaSearch):
 
     def on_trial_complete(self, trial_id, result=None, error=False):
         ot_trial = self._ot_trials.get(trial_id)
-        if ot_trial is not None and result and result.get("constraint") is not None:
-            ot_trial.set_constraint("episode_cost_minus_limit", float(result["constraint"]))
+        constraint = (result or {}).get("constraint")
+        # NaN until an episode completes after a (re)start: Optuna refuses it, and raising here
+        # would kill Tune's controller. A trial without a constraint value is one Optuna's TPE
+        # ranks below those with one, which is what an unmeasured cost deserves.
+        if ot_trial is not None and constraint is not None and math.isfinite(constraint):
+            ot_trial.set_constraint("episode_cost_minus_limit", float(constraint))
         super().on_trial_complete(trial_id, result=result, error=error)
 
 

@@ -164,3 +164,24 @@ def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
     assert needle in proc.stderr
     assert "Started a local Ray instance" not in proc.stdout + proc.stderr
     assert not (tmp_path / "ray_results").exists()
+
+
+def test_a_nan_constraint_does_not_kill_the_searcher():
+    """episode_cost is NaN until an episode completes after a (re)start; Optuna refuses NaN
+    constraints, and the error used to escape from inside Tune's controller."""
+    import math
+
+    import optuna
+    from ray import tune
+
+    searcher = ConstrainedOptunaSearch(space={"x": tune.uniform(0.0, 1.0)}, metric="objective", mode="max",
+                                       sampler=optuna.samplers.TPESampler(seed=0))
+    searcher.suggest("nan")
+    searcher.suggest("finite")
+    searcher.on_trial_complete("nan", {"objective": -2e6, "constraint": math.nan})
+    searcher.on_trial_complete("finite", {"objective": 1.5, "constraint": -3.0})
+    nan_trial, finite_trial = searcher._ot_study.trials
+    assert nan_trial.state == finite_trial.state == optuna.trial.TrialState.COMPLETE
+    key = "constraints:episode_cost_minus_limit"  # where Optuna 5's set_constraint stores it
+    assert nan_trial.value == -2e6 and not any(k.startswith("constraints") for k in nan_trial.system_attrs)
+    assert finite_trial.system_attrs[key] == -3.0
