@@ -257,6 +257,11 @@ class LACConfig(AlgorithmConfig):
         self.normalize_actions = False
         self.rollout_fragment_length = "auto"
         self.num_env_runners = 0
+        # Wait for the runners: an iteration needs all env_steps_per_iteration steps, and RLlib's
+        # 60 s default silently drops a runner that needs longer (20k/K navigation steps at
+        # ~700 steps/s already do), leaving the iteration short of data. A dead runner is found
+        # by RLlib's fault tolerance, not by this timeout.
+        self.sample_timeout_s = None
         from lac_rllib.connectors import EpisodeCostCallback
 
         self.callbacks_class = EpisodeCostCallback

@@ -48,6 +48,7 @@ def test_spec_defaults_and_presets():
     assert (c.langevin_grad_clip, c.langevin_grad_clip_mode, c.nu_max_adaptive) == (1000.0, "batch", True)
     assert (c.lr_schedule, c.lr_final_fraction, c.actor_mean_init_scale) == ("linear", 0.5, 0.1)
     assert (c.obs_std_floor, c.polyak_from_actor_start) == (1e-2, True)
+    assert c.sample_timeout_s is None  # remote runners are waited for, never silently dropped
     assert LACConfig().task("SafetyPointGoal1-v0").env_steps_per_iteration == 20_000  # Table 5
     assert LACConfig().task("focops/AntVelocity-v0").env_steps_per_iteration == 5_000  # Table 4
     assert LACConfig().task("SafetyPointButton1-v0").langevin_steps == 50  # Table 5, Button
