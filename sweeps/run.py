@@ -75,6 +75,10 @@ def make_plan(args) -> dict:
     sets = parse_sets(args.set)  # unknown fields list the accepted ones
     for field, value in sets.items():
         check_field(field, value)
+    if not args.address and args.cpus_per_trial > (os.cpu_count() or 1):
+        # Tune would keep such a trial PENDING forever on the local Ray this command starts.
+        raise ValueError(f"--cpus-per-trial {args.cpus_per_trial} is more than this machine's "
+                         f"{os.cpu_count()} CPUs; accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
     check_address(args.address)
     uri = args.tracking_uri or default_tracking_uri()
     check_reachable(uri)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import platform
+import sys
 import tempfile
 from pathlib import Path
 
@@ -65,6 +66,11 @@ def param_space(plan: dict, args, parent_run_id: str) -> dict:
 def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
     if not ray.is_initialized():  # tests drive sweeps inside their own Ray session
         ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    biggest = max((n["Resources"].get("CPU", 0) for n in ray.nodes() if n["Alive"]), default=0)
+    if args.cpus_per_trial > biggest:  # Tune would leave every trial PENDING, silently, forever
+        print(f"sweeps/run.py: error: --cpus-per-trial {args.cpus_per_trial} is more than the largest node of the "
+              f"Ray cluster has ({biggest:g} CPUs); accepted: 1..{biggest:g}", file=sys.stderr)
+        return 2
     if args.max_concurrent is None and args.address:  # the plan could only count this machine's CPUs
         cpus = int(ray.cluster_resources().get("CPU", 1))
         plan["concurrency"] = min(plan["n_trials"], max(1, cpus // args.cpus_per_trial))

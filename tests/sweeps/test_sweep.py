@@ -155,6 +155,7 @@ def test_resume_after_driver_sigkill(tmp_path):
     (["--address", "127.0.0.1:9"], "--address 127.0.0.1:9: cannot connect"),
     (["--address", "not an address"], "accepted: auto, HOST:PORT"),
     (["--set", "nu_max_adaptive=2"], "nu_max_adaptive=2 is invalid; accepted: True | False"),
+    (["--cpus-per-trial", "4096"], "--cpus-per-trial 4096 is more than this machine's"),
     (["--set", "no_such_field=1"], "unknown LAC config field 'no_such_field'"),
 ])
 def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
@@ -185,3 +186,14 @@ def test_a_nan_constraint_does_not_kill_the_searcher():
     key = "constraints:episode_cost_minus_limit"  # where Optuna 5's set_constraint stores it
     assert nan_trial.value == -2e6 and not any(k.startswith("constraints") for k in nan_trial.system_attrs)
     assert finite_trial.system_attrs[key] == -3.0
+
+
+def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, capsys):
+    # The session's Ray has 2 CPUs (as a cluster reached with --address could have): a 3-CPU trial
+    # would wait in PENDING forever.
+    args = _args(tmp_path)
+    plan = cli.make_plan(args)
+    args.cpus_per_trial = 3
+    assert run_sweep(plan, args, Path(plan["storage"]) / plan["name"], "test-commit") == 2
+    assert "--cpus-per-trial 3 is more than the largest node of the Ray cluster has (2 CPUs)" in capsys.readouterr().err
+    assert not (tmp_path / "mlflow.db").exists() or not _runs(tmp_path)[1], "no parent run for a sweep that never ran"
