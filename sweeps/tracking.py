@@ -27,6 +27,7 @@ from mlflow.tracking import MlflowClient  # noqa: E402
 
 SWEEP_TAG, TRIAL_TAG, NODE_TAG = "lac.sweep", "lac.trial_id", "lac.node_id"
 CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
+ERROR_TAG = "lac.error"  # the last error of a failed attempt (cleared when a retry starts)
 PARENT_TAG = "mlflow.parentRunId"
 GAP_TAG, GAP_SECONDS_TAG = "lac.tracking_gap_retries", "lac.tracking_gap_s"
 RETRY_S = float(os.environ.get("LAC_TRACKING_RETRY_S", "120"))  # how long a call waits for the server
@@ -159,14 +160,22 @@ class TrialTracker:
                   file=sys.stderr, flush=True)
 
     def open(self, params: dict, tags: dict) -> str:
-        """Find this trial's run (resume, retry) or create it; log params and tags once."""
-        found = self.client.search_runs(
-            [self.experiment_id], filter_string=f"tags.`{TRIAL_TAG}` = '{self.trial_id}'", max_results=1)
+        """Find this trial's run (resume, retry) or create it; log params and tags once.
+
+        The run is looked up under this sweep's parent run only: trial ids have ~20 random bits
+        and every sweep shares one experiment, so an id alone could adopt another sweep's run.
+        """
+        query = f"tags.`{TRIAL_TAG}` = '{self.trial_id}'"
+        if self.parent_run_id:
+            query += f" and tags.`{PARENT_TAG}` = '{self.parent_run_id}'"
+        found = self.client.search_runs([self.experiment_id], filter_string=query, max_results=1)
         if found:
             self.run_id = found[0].info.run_id
             self.previous = found[0]  # what an earlier attempt left (status, tags, metrics)
             if found[0].info.status != "FINISHED":
                 self.client.update_run(self.run_id, status="RUNNING")
+                if ERROR_TAG in found[0].data.tags:  # a retry starts clean; error.txt keeps the history
+                    self.client.delete_tag(self.run_id, ERROR_TAG)
             return self.run_id
         all_tags = {TRIAL_TAG: self.trial_id, "mlflow.runName": self.run_name, **tags}
         if self.parent_run_id:

@@ -20,7 +20,7 @@ from ray import tune
 from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 from lac_rllib.learner import REPORTED_KEYS
 from lac_rllib.train import build_config
-from sweeps.tracking import CHECKPOINT_TAG, NODE_TAG, TrialTracker
+from sweeps.tracking import CHECKPOINT_TAG, ERROR_TAG, NODE_TAG, TrialTracker
 
 INFEASIBLE_OFFSET = 1e6
 
@@ -93,7 +93,7 @@ class LACTrainable(tune.Trainable):
                 self._finish_run()
             return {**metrics, "done": done}
         except Exception as e:
-            self.tracker.set_tags({"lac.error": f"{type(e).__name__}: {e}"[:4000]})
+            self.tracker.set_tags({ERROR_TAG: f"{type(e).__name__}: {e}"[:4000]})
             self.tracker.log_text(traceback.format_exc(), "error.txt")
             self.tracker.finish("FAILED")
             raise

@@ -1,0 +1,34 @@
+"""sweeps/tracking.py: a trial's run is found under its own sweep, and a retry starts clean."""
+
+from mlflow.tracking import MlflowClient
+
+from sweeps.tracking import ERROR_TAG, TRIAL_TAG, TrialTracker
+
+
+def _parent(client, exp_id, name):
+    return client.create_run(exp_id, run_name=name, tags={"lac.sweep": "1"}).info.run_id
+
+
+def test_trial_runs_are_found_under_their_own_sweep_and_retries_drop_the_stale_error(tmp_path):
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    first = TrialTracker(uri, "exp", None, "t-0001", "x")  # creates the experiment
+    client = MlflowClient(uri)
+    sweep_a, sweep_b = _parent(client, first.experiment_id, "a"), _parent(client, first.experiment_id, "b")
+
+    old = TrialTracker(uri, "exp", sweep_a, "abcde_00000", "label")
+    old_run = old.open({"seed": 0}, {})
+    old.finish("FINISHED")
+    # Same trial id (Tune's ids have ~20 random bits), another sweep: a new run, not the old FINISHED one.
+    new = TrialTracker(uri, "exp", sweep_b, "abcde_00000", "label")
+    new_run = new.open({"seed": 0}, {})
+    assert new_run != old_run and new.previous is None
+    assert client.get_run(new_run).data.tags[TRIAL_TAG] == "abcde_00000"
+
+    # A failed attempt leaves lac.error; the retry (same sweep, same trial) continues the run without it.
+    new.set_tags({ERROR_TAG: "RuntimeError: boom"})
+    new.flush()
+    new.finish("FAILED")
+    retry = TrialTracker(uri, "exp", sweep_b, "abcde_00000", "label")
+    assert retry.open({"seed": 0}, {}) == new_run
+    run = client.get_run(new_run)
+    assert run.info.status == "RUNNING" and ERROR_TAG not in run.data.tags
