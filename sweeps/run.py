@@ -8,6 +8,7 @@ sweep, one child run per trial; the Tune experiment lives in ``--storage``/``--n
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import socket
@@ -18,6 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `python sweeps/run.py` from a checkout
 
 from sweeps import spaces  # noqa: E402
+from sweeps.record import SWEEP_FILE, resume_differences  # noqa: E402
 from sweeps.tracking import check_reachable, default_tracking_uri  # noqa: E402
 
 # Rough env steps per second of one trial (sampling + learning, 1 CPU) for the plan's estimate.
@@ -129,8 +131,13 @@ def main(argv=None) -> int:
     try:
         plan = make_plan(args)
         sweep_dir = Path(plan["storage"]) / plan["name"]
-        if args.resume and not (sweep_dir / "sweep.json").exists():
+        if args.resume and not (sweep_dir / SWEEP_FILE).exists():
             raise ValueError(f"--resume: no sweep named {plan['name']!r} under {plan['storage']}")
+        if args.resume:
+            diff = resume_differences(json.loads((sweep_dir / SWEEP_FILE).read_text()), plan, args)
+            if diff:
+                raise ValueError(f"--resume: sweep {plan['name']!r} was started with other settings: "
+                                 f"{'; '.join(diff)}. Resume with the original ones, or start a new --name")
         if not args.resume and sweep_dir.exists():
             raise ValueError(f"a sweep named {plan['name']!r} exists under {plan['storage']}; pass --resume or --name")
     except ValueError as e:

@@ -15,6 +15,7 @@ from ray.tune.schedulers import ASHAScheduler
 from ray.tune.search.optuna import OptunaSearch
 
 from sweeps import spaces
+from sweeps.record import SWEEP_FILE, sweep_record
 from sweeps.tracking import SweepTracker
 from sweeps.trainable import LACTrainable
 
@@ -76,7 +77,7 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
         plan["concurrency"] = min(plan["n_trials"], max(1, cpus // args.cpus_per_trial))
         print(f"  cluster: {cpus} CPUs -> {plan['concurrency']} trials at once", flush=True)
     tracker = SweepTracker(plan["tracking_uri"], plan["experiment"])
-    state_file = sweep_dir / "sweep.json"
+    state_file = sweep_dir / SWEEP_FILE
     previous = json.loads(state_file.read_text()) if args.resume else {}
     parent = tracker.start(
         plan["name"],
@@ -116,7 +117,7 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
         plan_json = {k: v for k, v in plan.items() if k != "trials"} | {
             "trial_labels": [t.label() for t in plan["trials"]] if plan["trials"] else None}
         tracker.client.log_text(parent, json.dumps(plan_json, indent=2, default=str), "plan.json")
-    state_file.write_text(json.dumps({"parent_run_id": parent, "plan": {k: v for k, v in plan.items() if k != "trials"}}))
+    state_file.write_text(json.dumps(sweep_record(plan, args, parent), default=str))
     grid = tuner.fit()
     n_errors = sum(1 for r in grid if r.error)
     close_sweep(tracker, parent, n_errors)

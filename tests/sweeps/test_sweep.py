@@ -197,3 +197,25 @@ def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, c
     assert run_sweep(plan, args, Path(plan["storage"]) / plan["name"], "test-commit") == 2
     assert "--cpus-per-trial 3 is more than the largest node of the Ray cluster has (2 CPUs)" in capsys.readouterr().err
     assert not (tmp_path / "mlflow.db").exists() or not _runs(tmp_path)[1], "no parent run for a sweep that never ran"
+
+
+@pytest.mark.parametrize("changed,needle", [
+    (["--experiment", "other"], "--experiment='test' (now 'other')"),
+    (["--seeds", "3"], "--seeds=2 (now 3)"),
+    (["--tracking-uri", "sqlite:///elsewhere.db"], "tracking_uri="),
+])
+def test_resume_with_other_settings_is_refused(tmp_path, changed, needle):
+    from sweeps.record import SWEEP_FILE, sweep_record
+
+    args = _args(tmp_path)
+    plan = cli.make_plan(args)
+    sweep_dir = Path(plan["storage"]) / plan["name"]
+    sweep_dir.mkdir(parents=True)
+    (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
+    base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
+            "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
+    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), *base, *changed, "--resume"]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert "was started with other settings" in proc.stderr and needle in proc.stderr
+    assert "Started a local Ray instance" not in proc.stdout + proc.stderr
