@@ -7,7 +7,9 @@ markdown, best feasible configuration as JSON) and the plots of the paper's abla
 Conventions:
 - A configuration is (group, param, value, task); its rows are its seeds.
 - A trial *failed* if its status is "ERROR" or its final episode_return / episode_cost is NaN.
-  Failed trials count in ``n_failed`` and are left out of every statistic and plot.
+  Failed trials count in ``n_failed`` and are left out of every statistic and plot. Trials a
+  scheduler (ASHA) stopped early count in ``n_stopped`` and are left out of the statistics too:
+  their score is from a smaller budget.
 - Spreads are the sample std over seeds (ddof=1); with one finished seed it is NaN and the
   markdown shows "14.20 ± –". Curve bands use the same std and are omitted for a single seed.
 - Plots get one panel (row, for curves) per group, split per task if a group spans several.
@@ -26,7 +28,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 KEYS = ["group", "param", "value", "task"]
-STATS = ["n_seeds", "n_failed", "return_mean", "return_std", "cost_mean", "cost_std",
+STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
          "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean"]
 
 
@@ -74,12 +76,14 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
     """One row per (group, param, value, task) with seed statistics; see the module conventions."""
     df, failed = _prepared(trials)
     rows = []
+    stopped = df["status"].astype(str).eq("STOPPED") & ~failed  # ASHA: a score at an earlier budget
     for key, g in df.groupby(KEYS, dropna=False, sort=False):
-        ok = g[~failed.loc[g.index]]
+        ok = g[~(failed | stopped).loc[g.index]]
         ret, cost = (pd.to_numeric(ok[c], errors="coerce") for c in ("episode_return", "episode_cost"))
         limit = pd.to_numeric(g["cost_limit"], errors="coerce").median()
         rows.append(dict(
-            zip(KEYS, key), n_seeds=len(ok), n_failed=len(g) - len(ok),
+            zip(KEYS, key), n_seeds=len(ok), n_failed=int(failed.loc[g.index].sum()),
+            n_stopped=int(stopped.loc[g.index].sum()),
             return_mean=ret.mean(), return_std=ret.std(ddof=1),
             cost_mean=cost.mean(), cost_std=cost.std(ddof=1), cost_limit=limit,
             feasible_fraction=pd.to_numeric(ok["feasible"], errors="coerce").mean(),
@@ -114,7 +118,8 @@ def markdown_table(summary: pd.DataFrame) -> str:
     lines = ["| group | swept | value | task | seeds | return (mean ± std) | cost (mean ± std) "
              "| limit | feasible |", "|---|---|---|---|---:|---:|---:|---:|---|"]
     for r in summary.to_dict("records"):
-        seeds = f"{r['n_seeds']}" + (f" (+{r['n_failed']} failed)" if r["n_failed"] else "")
+        seeds = (f"{r['n_seeds']}" + (f" (+{r['n_failed']} failed)" if r["n_failed"] else "")
+                 + (f" (+{r['n_stopped']} stopped early)" if r["n_stopped"] else ""))
         n_ok = "–" if _is_na(r["feasible_fraction"]) else round(r["feasible_fraction"] * r["n_seeds"])
         feas = f"{'yes' if r['mean_feasible'] else 'no'} ({n_ok}/{r['n_seeds']} seeds)"
         cols = [r["group"], r["param"] or "–", _fmt_value(r["value"]), r["task"], seeds,

@@ -19,6 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `python sweeps/run.py` from a checkout
 
 from sweeps import spaces  # noqa: E402
+from sweeps.lock import DriverLock, SweepLocked  # noqa: E402
 from sweeps.record import SWEEP_FILE, resume_differences  # noqa: E402
 from sweeps.tracking import check_reachable, default_tracking_uri  # noqa: E402
 
@@ -138,16 +139,32 @@ def main(argv=None) -> int:
             if diff:
                 raise ValueError(f"--resume: sweep {plan['name']!r} was started with other settings: "
                                  f"{'; '.join(diff)}. Resume with the original ones, or start a new --name")
-        if not args.resume and sweep_dir.exists():
+        # A directory without a record or Tune state is a start that failed early: startable.
+        started = (sweep_dir / SWEEP_FILE).exists() or any(sweep_dir.glob("experiment_state*.json"))
+        if not args.resume and started:
             raise ValueError(f"a sweep named {plan['name']!r} exists under {plan['storage']}; pass --resume or --name")
     except ValueError as e:
         print(f"sweeps/run.py: error: {e}", file=sys.stderr)
         return 2
-    print_plan(plan, args)
+    lock = None
+    if "://" not in plan["storage"]:  # object stores have no atomic create (sweeps/lock.py)
+        lock = DriverLock(sweep_dir)
+        try:
+            lock.acquire()
+        except SweepLocked as e:
+            print(f"sweeps/run.py: error: {e}", file=sys.stderr)
+            return 2
+    else:
+        print(f"note: no driver lock on {plan['storage']}: do not run this sweep from two drivers at once",
+              file=sys.stderr)
+    try:
+        print_plan(plan, args)
+        from sweeps.sweep import run_sweep
 
-    from sweeps.sweep import run_sweep
-
-    return run_sweep(plan, args, sweep_dir, git_commit())
+        return run_sweep(plan, args, sweep_dir, git_commit())
+    finally:
+        if lock is not None:
+            lock.release()
 
 
 if __name__ == "__main__":

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import platform
+import signal
 import sys
 import tempfile
 from pathlib import Path
@@ -16,7 +18,7 @@ from ray.tune.search.optuna import OptunaSearch
 
 from sweeps import spaces
 from sweeps.record import SWEEP_FILE, sweep_record
-from sweeps.tracking import SweepTracker
+from sweeps.tracking import STATUS_TAG, STOPPED_TAG, SweepTracker
 from sweeps.trainable import LACTrainable
 
 METRIC, MODE = "objective", "max"
@@ -86,7 +88,49 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
         tags={"lac.space": plan["space"], "lac.budget": plan["budget"], "lac.sweep_name": plan["name"]},
         run_id=previous.get("parent_run_id"),
     )
+    # The record first: from here on a failure leaves a sweep that --resume can pick up (with
+    # the same parent run), never a directory that is neither startable nor resumable.
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    state_file.write_text(json.dumps(sweep_record(plan, args, parent), default=str))
+    try:
+        tuner = _tuner(plan, args, parent, sweep_dir)
+        if not args.resume:
+            plan_json = {k: v for k, v in plan.items() if k != "trials"} | {
+                "trial_labels": [t.label() for t in plan["trials"]] if plan["trials"] else None}
+            tracker.client.log_text(parent, json.dumps(plan_json, indent=2, default=str), "plan.json")
+    except BaseException:
+        tracker.client.set_tag(parent, STATUS_TAG, "failed to start")
+        tracker.client.set_terminated(parent, status="FAILED")
+        raise
+    # Tune stops gracefully on SIGINT and SIGUSR1 (saving its state); SIGTERM (`kill`, a job
+    # scheduler) would kill the driver mid-write. Route it to the same graceful stop.
+    previous_term = signal.signal(signal.SIGTERM, lambda *_: os.kill(os.getpid(), signal.SIGUSR1))
+    try:
+        grid = tuner.fit()
+    finally:
+        signal.signal(signal.SIGTERM, previous_term)
+    n_errors, n_done = grid.num_errors, grid.num_terminated
+    if n_done + n_errors < plan["n_trials"]:  # stopped by a signal: trials are left to run
+        closed = close_open_children(tracker, parent, "KILLED")
+        tracker.client.set_tag(parent, STATUS_TAG, "interrupted")
+        tracker.client.set_terminated(parent, status="KILLED")
+        print(f"interrupted: {n_done} of {plan['n_trials']} trials finished ({n_errors} failed, {closed} runs closed "
+              f"as KILLED); resume with --resume", file=sys.stderr, flush=True)
+        return 130
+    stopped = close_open_children(tracker, parent, "FINISHED", tags={STOPPED_TAG: "1"})  # ASHA's early stops
+    close_sweep(tracker, parent, n_errors)
+    print(f"sweep done: {n_done} of {plan['n_trials']} trials finished ({stopped} stopped early by the scheduler), "
+          f"{n_errors} failed; MLflow parent run {parent}")
+    print(f"  mlflow ui --backend-store-uri {plan['tracking_uri']}")
+    return 0
+
+
+def _tuner(plan: dict, args, parent: str, sweep_dir: Path) -> tune.Tuner:
+    """Tune's state if the sweep has one (resume), else a new Tuner (also for a sweep whose
+    first start failed before Tune wrote anything)."""
     trainable = tune.with_resources(LACTrainable, {"cpu": args.cpus_per_trial})
+    if args.resume and tune.Tuner.can_restore(str(sweep_dir)):
+        return tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True, resume_errored=False)
     failure = tune.FailureConfig(max_failures=args.max_failures)
     ckpt = tune.CheckpointConfig(checkpoint_frequency=1, num_to_keep=2, checkpoint_at_end=True)
     run_config = tune.RunConfig(
@@ -94,36 +138,32 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
         progress_reporter=tune.CLIReporter(metric_columns=TABLE_COLUMNS, max_report_frequency=30),
         verbose=1,
     )
-    if args.resume:
-        tuner = tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True,
-                                   resume_errored=False)
-    else:
-        search = None
-        if plan["trials"] is None:
-            import optuna
+    search = None
+    if plan["trials"] is None:
+        import optuna
 
-            search = ConstrainedOptunaSearch(sampler=optuna.samplers.TPESampler(seed=args.optuna_seed),
-                                             metric=METRIC, mode=MODE)
-        scheduler = (ASHAScheduler(time_attr="env_steps", metric=METRIC, mode=MODE, max_t=plan["timesteps"],
-                                   grace_period=max(1, plan["timesteps"] // 4)) if args.scheduler == "asha" else None)
-        tuner = tune.Tuner(
-            trainable, param_space=param_space(plan, args, parent),
-            tune_config=tune.TuneConfig(num_samples=plan["n_trials"] if search else 1, search_alg=search,
-                                        scheduler=scheduler, max_concurrent_trials=plan["concurrency"]),
-            run_config=run_config,
-        )
-    sweep_dir.mkdir(parents=True, exist_ok=True)
-    if not args.resume:
-        plan_json = {k: v for k, v in plan.items() if k != "trials"} | {
-            "trial_labels": [t.label() for t in plan["trials"]] if plan["trials"] else None}
-        tracker.client.log_text(parent, json.dumps(plan_json, indent=2, default=str), "plan.json")
-    state_file.write_text(json.dumps(sweep_record(plan, args, parent), default=str))
-    grid = tuner.fit()
-    n_errors = sum(1 for r in grid if r.error)
-    close_sweep(tracker, parent, n_errors)
-    print(f"sweep done: {len(grid)} trials, {n_errors} failed; MLflow parent run {parent}")
-    print(f"  mlflow ui --backend-store-uri {plan['tracking_uri']}")
-    return 0
+        search = ConstrainedOptunaSearch(sampler=optuna.samplers.TPESampler(seed=args.optuna_seed),
+                                         metric=METRIC, mode=MODE)
+    scheduler = (ASHAScheduler(time_attr="env_steps", metric=METRIC, mode=MODE, max_t=plan["timesteps"],
+                               grace_period=max(1, plan["timesteps"] // 4)) if args.scheduler == "asha" else None)
+    return tune.Tuner(
+        trainable, param_space=param_space(plan, args, parent),
+        tune_config=tune.TuneConfig(num_samples=plan["n_trials"] if search else 1, search_alg=search,
+                                    scheduler=scheduler, max_concurrent_trials=plan["concurrency"]),
+        run_config=run_config,
+    )
+
+
+def close_open_children(tracker: SweepTracker, parent: str, status: str, tags: dict | None = None) -> int:
+    """Close the child runs a trial left RUNNING (its process was stopped before it could)."""
+    n = 0
+    for run in tracker.children(parent):
+        if run.info.status == "RUNNING":
+            for k, v in (tags or {}).items():
+                tracker.client.set_tag(run.info.run_id, k, v)
+            tracker.client.set_terminated(run.info.run_id, status=status)
+            n += 1
+    return n
 
 
 def close_sweep(tracker: SweepTracker, parent: str, n_errors: int) -> None:
@@ -139,7 +179,8 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int) -> None:
         value = json.loads(p.get("swept_value", "null"))
         rows.append({"trial_id": tid, "group": p.get("group", ""), "param": p.get("swept_param", ""), "value": value,
                      "task": p.get("task"), "seed": int(p.get("seed", 0)),
-                     "status": "TERMINATED" if run.info.status == "FINISHED" else "ERROR",
+                     "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
+                     if run.info.status == "FINISHED" else "ERROR",
                      **{k: m.get(k, float("nan")) for k in ("episode_return", "episode_cost", "cost_limit",
                                                             "feasible", "objective")},
                      **{k: p[k] for k in ("langevin_steps", "langevin_step_size", "temperature", "beta") if k in p}})
@@ -154,4 +195,5 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int) -> None:
             write_sweep_reports(trials, curves, tmp)
         tracker.client.log_artifacts(parent, tmp, "summary")
     tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
+    tracker.client.set_tag(parent, STATUS_TAG, "finished")
     tracker.client.set_terminated(parent, status="FINISHED")

@@ -28,6 +28,8 @@ from mlflow.tracking import MlflowClient  # noqa: E402
 SWEEP_TAG, TRIAL_TAG, NODE_TAG = "lac.sweep", "lac.trial_id", "lac.node_id"
 CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
 ERROR_TAG = "lac.error"  # the last error of a failed attempt (cleared when a retry starts)
+STATUS_TAG = "lac.sweep_status"  # on the parent run: finished | interrupted
+STOPPED_TAG = "lac.stopped_early"  # on a child run the scheduler (ASHA) stopped before its budget
 PARENT_TAG = "mlflow.parentRunId"
 GAP_TAG, GAP_SECONDS_TAG = "lac.tracking_gap_retries", "lac.tracking_gap_s"
 RETRY_S = float(os.environ.get("LAC_TRACKING_RETRY_S", "120"))  # how long a call waits for the server

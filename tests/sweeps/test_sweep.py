@@ -146,6 +146,47 @@ def test_resume_after_driver_sigkill(tmp_path):
         assert steps[-1] == 2000 and steps == sorted(steps)
 
 
+def test_sigint_stops_cleanly_and_resume_completes_the_rest(tmp_path):
+    import re
+
+    proc = _cli(tmp_path, start_new_session=True)
+    deadline = time.time() + 300
+    try:
+        while time.time() < deadline:  # one trial finished and the next one running
+            time.sleep(2)
+            if (tmp_path / "ray_results" / "smoke-PointHazard-v0-smoke" / "sweep.json").exists():
+                try:
+                    _, _, children = _runs(tmp_path)
+                except Exception:  # noqa: BLE001 - the store may be mid-creation
+                    continue
+                if any(c.info.status == "FINISHED" for c in children) and any(
+                        c.info.status == "RUNNING" for c in children):
+                    break
+        proc.send_signal(signal.SIGINT)  # Ctrl-C
+        out, _ = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, out[-3000:]
+    match = re.search(r"interrupted: (\d) of 4 trials finished.*resume with --resume", out)
+    assert match and int(match.group(1)) < 4, out[-3000:]
+    assert "sweep done" not in out
+    _, parents, children = _runs(tmp_path)
+    assert parents[0].info.status == "KILLED" and parents[0].data.tags["lac.sweep_status"] == "interrupted"
+    assert children and not [c for c in children if c.info.status == "RUNNING"], "no child run left RUNNING"
+
+    resumed = _cli(tmp_path, "--resume")
+    out, _ = resumed.communicate(timeout=600)
+    assert resumed.returncode == 0, out[-3000:]
+    client, parents, children = _runs(tmp_path)
+    assert parents[0].info.status == "FINISHED" and parents[0].data.tags["lac.sweep_status"] == "finished"
+    ids = [c.data.tags["lac.trial_id"] for c in children]
+    assert len(children) == 4 and len(set(ids)) == 4 and all(c.info.status == "FINISHED" for c in children)
+    for c in children:
+        steps = [m.step for m in client.get_metric_history(c.info.run_id, "env_steps")]
+        assert steps == sorted(set(steps)) and steps[-1] == 2000, steps  # no duplicate metric steps
+
+
 @pytest.mark.parametrize("extra,needle", [
     (["--space", "nope"], "invalid choice: 'nope'"),
     (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
@@ -219,3 +260,44 @@ def test_resume_with_other_settings_is_refused(tmp_path, changed, needle):
     assert proc.returncode == 2, proc.stderr
     assert "was started with other settings" in proc.stderr and needle in proc.stderr
     assert "Started a local Ray instance" not in proc.stdout + proc.stderr
+
+
+def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monkeypatch):
+    import sweeps.sweep as sweep_mod
+
+    args = _args(tmp_path)
+    plan = cli.make_plan(args)
+    sweep_dir = Path(plan["storage"]) / plan["name"]
+
+    def broken(*a, **k):
+        raise RuntimeError("Tuner could not be built")
+
+    with monkeypatch.context() as m:
+        m.setattr(sweep_mod, "_tuner", broken)
+        with pytest.raises(RuntimeError, match="could not be built"):
+            run_sweep(plan, args, sweep_dir, "test-commit")
+    _, parents, _ = _runs(tmp_path)
+    assert parents[0].info.status == "FAILED" and parents[0].data.tags["lac.sweep_status"] == "failed to start"
+    assert (sweep_dir / "sweep.json").exists()  # resumable: not "exists" and "no sweep" at once
+    args.resume = True
+    assert run_sweep(cli.make_plan(args), args, sweep_dir, "test-commit") == 0
+    _, parents, children = _runs(tmp_path)
+    assert len(parents) == 1 and parents[0].info.status == "FINISHED"  # the same parent run, completed
+    assert len(children) == 4 and all(c.info.status == "FINISHED" for c in children)
+
+
+def test_asha_early_stops_are_closed_and_called_stopped(ray_session, tmp_path):
+    import pandas as pd
+
+    assert _sweep(tmp_path, _args(tmp_path, "--scheduler", "asha")) == 0
+    client, parents, children = _runs(tmp_path)
+    assert children and not [c for c in children if c.info.status != "FINISHED"], "every run closed"
+    last = {c.info.run_id: client.get_metric_history(c.info.run_id, "env_steps")[-1].step for c in children}
+    stopped = [c for c in children if last[c.info.run_id] < 2000]
+    assert stopped, "ASHA (reduction factor 4, 4 trials) should stop at least one trial at its first rung"
+    assert all(c.data.tags.get("lac.stopped_early") == "1" for c in stopped)
+    assert not any(c.data.tags.get("lac.stopped_early") for c in children if last[c.info.run_id] == 2000)
+    trials = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/trials.csv", str(tmp_path)))
+    assert "ERROR" not in set(trials["status"]) and (trials["status"] == "STOPPED").sum() == len(stopped)
+    summary = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/summary.csv", str(tmp_path)))
+    assert summary["n_stopped"].sum() == len(stopped) and summary["n_failed"].sum() == 0

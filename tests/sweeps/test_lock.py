@@ -1,0 +1,58 @@
+"""sweeps/lock.py: one driver per sweep (owner + heartbeat), and the CLI refusing a second one."""
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sweeps import run as cli
+from sweeps.lock import LOCK_FILE, STALE_S, DriverLock, SweepLocked
+from sweeps.record import SWEEP_FILE, sweep_record
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_second_driver_is_refused_and_a_dead_ones_lock_is_taken_over(tmp_path):
+    first = DriverLock(tmp_path)
+    first.acquire()
+    try:
+        with pytest.raises(SweepLocked, match=f"host {socket.gethostname()} pid {os.getpid()}"):
+            DriverLock(tmp_path).acquire()
+    finally:
+        first.release()
+    assert not (tmp_path / LOCK_FILE).exists()
+    # A driver killed with SIGKILL leaves its file. On another host: free once its heartbeat is stale.
+    (tmp_path / LOCK_FILE).write_text(json.dumps({"host": "elsewhere", "pid": 1, "heartbeat": time.time() - 5}))
+    with pytest.raises(SweepLocked, match="host elsewhere pid 1"):
+        DriverLock(tmp_path).acquire()
+    (tmp_path / LOCK_FILE).write_text(json.dumps({"host": "elsewhere", "pid": 1, "heartbeat": time.time() - STALE_S - 1}))
+    with DriverLock(tmp_path) as lock:
+        assert json.loads((tmp_path / LOCK_FILE).read_text())["pid"] == os.getpid() == lock.owner["pid"]
+    # On this host: free at once when its process is gone.
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / LOCK_FILE).write_text(json.dumps({"host": socket.gethostname(), "pid": dead.pid,
+                                                  "heartbeat": time.time()}))
+    with DriverLock(tmp_path):
+        pass
+
+
+def test_two_resume_drivers_at_once(tmp_path):
+    base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
+            "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
+    args = cli.parse_args(base)
+    plan = cli.make_plan(args)
+    sweep_dir = Path(plan["storage"]) / plan["name"]
+    sweep_dir.mkdir(parents=True)
+    (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
+    with DriverLock(sweep_dir):  # the first driver, alive
+        proc = subprocess.run([sys.executable, str(REPO / "sweeps" / "run.py"), *base, "--resume"], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert f"another driver: host {socket.gethostname()} pid {os.getpid()}" in proc.stderr
+    assert "Started a local Ray instance" not in proc.stdout + proc.stderr
