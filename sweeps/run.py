@@ -43,7 +43,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--address", default=None, help="Ray cluster address (host:port or auto); default: local Ray")
     p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI (default: sqlite store in the working dir)")
     p.add_argument("--experiment", default="lac-sweeps", help="MLflow experiment name")
-    p.add_argument("--storage", default="ray_results", help="Tune storage path (shared by all nodes on a cluster)")
+    p.add_argument("--storage", default="ray_results",
+                   help="Tune storage path (on a cluster: an absolute path every node mounts)")
     p.add_argument("--name", default=None, help="sweep name (default: space-task-budget); --resume finds it by name")
     p.add_argument("--resume", action="store_true", help="continue the sweep of the same name")
     p.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial (node loss)")
@@ -66,6 +67,25 @@ def check_address(address: str | None) -> None:
         raise ValueError(f"--address {address}: cannot connect ({e}); is `ray start --head` running there?") from None
 
 
+def check_storage(storage: str) -> None:
+    # The sweep's record, lock and Tune state are written through the local filesystem: a URI
+    # such as s3://bucket/x used to become a local directory named "s3:" (pathlib folds "//").
+    if "://" in storage and not storage.startswith("file://"):
+        raise ValueError(f"--storage {storage}: object stores are not supported yet; accepted: a filesystem path "
+                         "(on a cluster, one every node mounts at the same place, e.g. NFS)")
+
+
+def check_shared(uri: str, storage: str) -> None:
+    """On a cluster every trial runs on some node: the tracking store and the storage path must
+    be the same place for all of them, not one local copy per node."""
+    if uri.startswith(("sqlite:", "file:")) or "://" not in uri:
+        raise ValueError(f"--tracking-uri {uri} with --address: each node would write its own local store; "
+                         "accepted: http(s)://HOST:PORT of an mlflow server every node reaches (docker/README.md)")
+    if not storage.startswith("file://") and not os.path.isabs(storage):
+        raise ValueError(f"--storage {storage} with --address: a relative path is a different directory on every "
+                         "node; accepted: an absolute path every node mounts at the same place")
+
+
 def make_plan(args) -> dict:
     spaces.validate(args.space, args.task, args.budget, args.seeds)
     for flag in ("num_samples", "cpus_per_trial", "max_concurrent"):
@@ -84,6 +104,9 @@ def make_plan(args) -> dict:
                          f"{os.cpu_count()} CPUs; accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
     check_address(args.address)
     uri = args.tracking_uri or default_tracking_uri()
+    check_storage(args.storage)
+    if args.address not in (None, "local"):
+        check_shared(uri, args.storage)
     check_reachable(uri)
     task = spaces.default_task(args.space, args.task)
     budget = spaces.BUDGETS[args.budget]
@@ -98,7 +121,7 @@ def make_plan(args) -> dict:
         "trials": trials, "n_trials": n_trials, "concurrency": min(concurrency, n_trials), "sets": sets,
         "estimated_wall_s": per_trial * math.ceil(n_trials / min(concurrency, n_trials)),
         "tracking_uri": uri, "experiment": args.experiment, "name": name,
-        "storage": str(Path(args.storage).resolve()) if "://" not in args.storage else args.storage,
+        "storage": str(Path(args.storage.removeprefix("file://")).resolve()),
     }
 
 

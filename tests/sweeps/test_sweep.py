@@ -197,9 +197,14 @@ def test_sigint_stops_cleanly_and_resume_completes_the_rest(tmp_path):
     (["--address", "not an address"], "accepted: auto, HOST:PORT"),
     (["--set", "nu_max_adaptive=2"], "nu_max_adaptive=2 is invalid; accepted: True | False"),
     (["--cpus-per-trial", "4096"], "--cpus-per-trial 4096 is more than this machine's"),
+    (["--storage", "s3://bucket/sweeps"], "--storage s3://bucket/sweeps: object stores are not supported"),
     (["--set", "no_such_field=1"], "unknown LAC config field 'no_such_field'"),
 ])
 def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
+    _check_bad_input(tmp_path, extra, needle)
+
+
+def _check_bad_input(tmp_path, extra, needle):
     cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", *extra]
     proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
@@ -301,3 +306,18 @@ def test_asha_early_stops_are_closed_and_called_stopped(ray_session, tmp_path):
     assert "ERROR" not in set(trials["status"]) and (trials["status"] == "STOPPED").sum() == len(stopped)
     summary = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/summary.csv", str(tmp_path)))
     assert summary["n_stopped"].sum() == len(stopped) and summary["n_failed"].sum() == 0
+
+
+@pytest.mark.parametrize("extra,needle", [
+    ([], "with --address: each node would write its own local store"),  # the default sqlite store
+    (["--tracking-uri", "http://127.0.0.1:{port}", "--storage", "relative/dir"],
+     "--storage relative/dir with --address: a relative path is a different directory on every node"),
+])
+def test_cluster_inputs_must_be_shared(tmp_path, extra, needle):
+    import socket
+
+    with socket.socket() as server:  # something listening, so --address passes its reachability check
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        _check_bad_input(tmp_path, ["--address", f"127.0.0.1:{port}", *[x.format(port=port) for x in extra]], needle)
