@@ -6,6 +6,12 @@
     python sweeps/evaluate.py --run-id RUN_ID [--tracking-uri URI] ...
     python sweeps/evaluate.py --best-of SWEEP_RUN_ID [--tracking-uri URI] ...
 
+A checkpoint is code: RLlib checkpoints are pickles, and restoring one runs what its bytes say.
+Evaluate only checkpoints from a source you trust. Checkpoints from MLflow (``--run-id``,
+``--best-of``) are checked file by file against the SHA-256 manifest the trial recorded on its
+run when it logged them (tag ``lac.checkpoint_sha256``) before anything is unpickled; a
+missing manifest or a mismatch stops with one line naming the file.
+
 Episode i is reset with seed S+i; equal seeds give identical results. ``generator`` acts with
 the actor's mean; ``langevin`` refines each action with Algorithm 1 (SPEC §1) started from the
 target actor, with noise seeded from the seed. Prints return, cost, cost limit and the fraction
@@ -154,6 +160,7 @@ def download_checkpoint(client, run, dst: str) -> str:
     """Download the run's checkpoint artifact directory; return its local path."""
     import mlflow.artifacts
 
+    from sweeps.integrity import CHECKSUM_TAG, IntegrityError, verify
     from sweeps.tracking import CHECKPOINT_TAG
 
     run_id = run.info.run_id
@@ -161,11 +168,16 @@ def download_checkpoint(client, run, dst: str) -> str:
     if not artifact_path:
         raise UsageError(f"MLflow run {run_id} has no checkpoint (tag {CHECKPOINT_TAG} is not set)")
     try:
-        return mlflow.artifacts.download_artifacts(
+        path = mlflow.artifacts.download_artifacts(
             run_id=run_id, artifact_path=artifact_path, dst_path=dst, tracking_uri=client.tracking_uri)
     except Exception as e:  # noqa: BLE001 (MlflowException, OSError, store-specific errors)
         raise UsageError(f"MLflow run {run_id} has no checkpoint: artifact {artifact_path!r} cannot be "
                          f"downloaded ({_one_line(e)})") from None
+    try:  # before anything is unpickled
+        verify(path, run.data.tags.get(CHECKSUM_TAG))
+    except IntegrityError as e:
+        raise UsageError(f"MLflow run {run_id}: {e}") from None
+    return path
 
 
 def resolve_checkpoint(args: argparse.Namespace, workdir: str) -> Resolved:

@@ -20,6 +20,7 @@ from ray import tune
 from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 from lac_rllib.learner import REPORTED_KEYS
 from lac_rllib.train import build_config
+from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import CHECKPOINT_TAG, ERROR_TAG, NODE_TAG, TrialTracker
 
 INFEASIBLE_OFFSET = 1e6
@@ -104,6 +105,9 @@ class LACTrainable(tune.Trainable):
 
         with tempfile.TemporaryDirectory() as tmp:
             self.algo.save_to_path(os.path.join(tmp, "checkpoint"))
+            # The manifest goes to the tracking store, the files to the artifact store: a restore
+            # checks one against the other (sweeps/integrity.py).
+            self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
             self.tracker.log_artifacts(os.path.join(tmp, "checkpoint"), "checkpoint")
             history = self.tracker.client.get_metric_history(self.tracker.run_id, EPISODE_RETURN)
             costs = self.tracker.client.get_metric_history(self.tracker.run_id, EPISODE_COST)

@@ -2,6 +2,7 @@
 
 import json
 import os
+import pickle
 import shutil
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from sweeps import evaluate as cli
+from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import CHECKPOINT_TAG, SWEEP_TAG
 
 REPO = Path(__file__).resolve().parents[2]
@@ -145,6 +147,7 @@ def mlflow_store(checkpoint, tmp_path_factory):
         tags = {"mlflow.parentRunId": parent, "mlflow.runName": name}
         if with_checkpoint:
             tags[CHECKPOINT_TAG] = "checkpoint"
+            tags[CHECKSUM_TAG] = manifest_tag(checkpoint)  # as the sweep's trials record it
         run = client.create_run(exp, tags=tags)
         rid = run.info.run_id
         client.log_param(rid, "task", TASK)
@@ -158,12 +161,29 @@ def mlflow_store(checkpoint, tmp_path_factory):
 
     sweep = client.create_run(exp, tags={SWEEP_TAG: "1"}).info.run_id
     runs = {"a": trial(sweep, "a", 1.0, True), "b": trial(sweep, "b", 2.0, True),
+            "tampered": trial(sweep, "tampered", 0.5, True), "unverified": trial(sweep, "unverified", 0.4, True),
             "c": trial(sweep, "c", 5.0, False, with_checkpoint=False),
             "d": trial(sweep, "d", 0.0, True, with_checkpoint=False)}
     infeasible_sweep = client.create_run(exp, tags={SWEEP_TAG: "1"}).info.run_id
     trial(infeasible_sweep, "x", 3.0, False, with_checkpoint=False)
+    client.delete_tag(runs["unverified"], CHECKSUM_TAG)  # logged before manifests existed
+    # Someone with write access to the artifact store swaps a pickle for one that runs code.
+    art = Path(client.get_run(runs["tampered"]).info.artifact_uri.removeprefix("file://")) / "checkpoint"
+    target = art / "learner_group" / "learner" / "rl_module" / "default_policy" / "module_state.pkl"
+    marker = root / "pwned"
+    target.write_bytes(pickle.dumps(_Payload(str(marker))))
     return {"uri": uri, "client": client, "sweep": sweep, "infeasible_sweep": infeasible_sweep,
-            **runs}
+            "marker": marker, **runs}
+
+
+class _Payload:
+    """Unpickling this creates a file: a stand-in for arbitrary code in a crafted checkpoint."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.path),))
 
 
 def test_cli_run_id_logs_eval_metrics_back(mlflow_store, capsys):
@@ -208,6 +228,18 @@ def test_cli_mlflow_errors_exit_2(mlflow_store, capsys, which, args, message):
     code, _, err = run_main(capsys, args, run_id, "--tracking-uri", s["uri"], "--no-progress")
     assert code == 2
     assert err.strip().splitlines()[-1].startswith("evaluate: error: ") and message in err
+
+
+@pytest.mark.parametrize("which, message", [
+    ("tampered", "checkpoint file learner_group/learner/rl_module/default_policy/module_state.pkl does not match "
+                 "its recorded SHA-256"),
+    ("unverified", "no SHA-256 manifest recorded"),
+])
+def test_cli_refuses_unverified_checkpoints_before_unpickling(mlflow_store, capsys, which, message):
+    s = mlflow_store
+    code, _, err = run_main(capsys, "--run-id", s[which], "--tracking-uri", s["uri"], "--no-progress")
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert not s["marker"].exists(), "the crafted pickle was loaded"
 
 
 def test_cli_mlflow_checkpoint_tag_without_artifact_exit_2(mlflow_store, capsys):

@@ -68,6 +68,7 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path):
         arts = {a.path for a in client.list_artifacts(c.info.run_id)}
         assert {"checkpoint", "config.json", "learning_curve.png"} <= arts
         assert client.list_artifacts(c.info.run_id, "checkpoint"), "checkpoint directory is empty"
+        assert "rllib_checkpoint.json" in json.loads(c.data.tags["lac.checkpoint_sha256"])  # the manifest
 
 
 def test_a_failing_trial_does_not_stop_the_others(ray_session, tmp_path):
