@@ -4,14 +4,15 @@
 # docker/README.md and by tests/cluster/.
 #
 #   docker/cluster.sh start            head + $WORKERS workers + mlflow server; prints the env
-#   docker/cluster.sh env              prints it again (KEY=VALUE lines; `source` it)
+#   docker/cluster.sh env              prints it again (KEY=VALUE lines)
 #   docker/cluster.sh stop             stops everything this script started, nothing else
 #   docker/cluster.sh stop NAME        stops one part: head, worker-1..K or mlflow
 #   docker/cluster.sh start mlflow     (re)starts the mlflow server on the same port, store and artifacts
 #   docker/cluster.sh kill NAME        SIGKILLs one node and its processes at once (a machine lost)
 #
 # Settings (environment, read by `start`; later commands read $LAC_CLUSTER_DIR/cluster.env):
-#   LAC_CLUSTER_DIR   state, logs, Ray temp dirs, Tune storage, MLflow store   (/tmp/lac-cluster)
+#   LAC_CLUSTER_DIR   state, logs, Ray temp dirs, Tune storage, MLflow store, created 0700 and
+#                     refused if another user owns it ($XDG_RUNTIME_DIR or /tmp, /lac-cluster-UID)
 #   WORKERS           Ray worker nodes (1)          CPUS_PER_NODE  CPUs each node offers (1)
 #   RAY_PORT          GCS port of the head (6379)   MLFLOW_PORT    tracking server port (5000)
 #   OBJECT_STORE_MB   object store per node (1024)
@@ -20,8 +21,8 @@
 #                     URI needs psycopg2 next to mlflow)
 #   STOP_GRACE        seconds between SIGTERM and SIGKILL on stop (5)
 #   RAY_AUTH_MODE     token (Ray's default): nodes, drivers and `ray job` calls share one token,
-#                     RAY_AUTH_TOKEN if set, else ~/.ray/auth_token (created if missing).
-#                     `disabled` turns it off (the tests do).
+#                     RAY_AUTH_TOKEN if set, else ~/.ray/auth_token (created 0600 if missing).
+#                     `disabled` turns it off.
 #
 # MLflow (and the optional dashboard) listen on 127.0.0.1 only. Ray's GCS and raylets listen on
 # every interface and advertise the machine's IP (Ray replaces 127.0.0.1 by it), hence the token.
@@ -33,25 +34,43 @@ set -euo pipefail
 
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 if [ -x "$REPO/.venv/bin/ray" ]; then export PATH="$REPO/.venv/bin:$PATH"; fi
-DIR=${LAC_CLUSTER_DIR:-/tmp/lac-cluster}
+DIR=${LAC_CLUSTER_DIR:-${XDG_RUNTIME_DIR:-/tmp}/lac-cluster-$(id -u)}
 HOST=127.0.0.1
+umask 077  # state, logs, stores and the token are this user's only
 
 die() { echo "cluster.sh: $*" >&2; exit 1; }
+
+private_dir() {  # the state directory: created 0700; refused if another user owns it (a planted cluster.env)
+    if [ ! -e "$DIR" ]; then mkdir -p -m 700 "$DIR"; fi
+    [ -d "$DIR" ] && [ ! -L "$DIR" ] || die "$DIR is not a directory"
+    [ "$(stat -c %u "$DIR")" = "$(id -u)" ] || die "$DIR belongs to another user (uid $(stat -c %u "$DIR")); refusing to use it"
+    chmod 700 "$DIR"
+}
 free_port() { python -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
 alive() { ps -o stat= -p "$1" 2>/dev/null | grep -v Z >/dev/null; }  # zombies count as gone
 
+SETTINGS="WORKERS CPUS_PER_NODE OBJECT_STORE_MB RAY_PORT MLFLOW_PORT DASHBOARD_PORT MLFLOW_BACKEND_URI RAY_AUTH_MODE"
+
+read_env() {  # cluster.env as data: only the known settings, KEY=VALUE, never executed (no `source`)
+    local key value
+    while IFS='=' read -r key value; do
+        case " $SETTINGS " in *" $key "*) printf -v "$key" '%s' "$value"; export "${key?}" ;; esac
+    done <"$DIR/cluster.env"
+}
+
 load_settings() {  # the settings of the running set-up (except for a full start), else the environment's
-    # shellcheck disable=SC1091
-    if [ -f "$DIR/cluster.env" ] && [ "${1:-}" != fresh ]; then set -a; . "$DIR/cluster.env"; set +a; fi
+    private_dir
+    if [ -f "$DIR/cluster.env" ] && [ "${1:-}" != fresh ]; then read_env; fi
     WORKERS=${WORKERS:-1} CPUS_PER_NODE=${CPUS_PER_NODE:-1} OBJECT_STORE_MB=${OBJECT_STORE_MB:-1024}
     RAY_PORT=${RAY_PORT:-6379} MLFLOW_PORT=${MLFLOW_PORT:-5000} DASHBOARD_PORT=${DASHBOARD_PORT:-}
     MLFLOW_BACKEND_URI=${MLFLOW_BACKEND_URI:-sqlite:///$DIR/mlflow/mlflow.db}
     export RAY_AUTH_MODE=${RAY_AUTH_MODE:-token}
 }
 
-ensure_token() {  # token mode without a token given: Ray's own file, generated once
+ensure_token() {  # token mode without a token given: Ray's own file, generated once, this user's only
     if [ "$RAY_AUTH_MODE" = token ] && [ -z "${RAY_AUTH_TOKEN:-}${RAY_AUTH_TOKEN_PATH:-}" ]; then
         ray get-auth-token --generate >/dev/null
+        chmod 600 "$HOME/.ray/auth_token"
     fi
 }
 
@@ -205,6 +224,7 @@ kill)
     stop_parts KILL "$part"
     write_env ;;
 env)
+    private_dir
     [ -f "$DIR/cluster.env" ] || die "no cluster under $DIR (run: $0 start)"
     load_settings
     print_env ;;

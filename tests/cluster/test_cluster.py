@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -41,7 +42,10 @@ class Cluster:
     def __init__(self, root: Path):
         self.root = root
         self.env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
-        self.env.update({"LAC_CLUSTER_DIR": str(root), "RAY_AUTH_MODE": "disabled", "WORKERS": "1",
+        # Ray's token authentication on, as in production, with a token of this test's own (not
+        # ~/.ray/auth_token): the nodes, the driver and every worker get it from the environment.
+        self.env.update({"LAC_CLUSTER_DIR": str(root), "RAY_AUTH_MODE": "token",
+                         "RAY_AUTH_TOKEN": secrets.token_hex(32), "WORKERS": "1",
                          "CPUS_PER_NODE": "1", "OBJECT_STORE_MB": "256", "RAY_PORT": str(free_port()),
                          "MLFLOW_PORT": str(free_port()), "DASHBOARD_PORT": "", "RAY_DEDUP_LOGS": "0"})
 
