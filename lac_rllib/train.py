@@ -75,7 +75,13 @@ def resumable_checkpoint(output: str) -> str | None:
 
 
 def check_output(output: str, config: LACConfig, resume: bool) -> None:
-    """Refuse to mix runs in one output directory (before Ray starts)."""
+    """A writable directory that holds no other run (checked before Ray starts)."""
+    try:
+        os.makedirs(output, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"--output {output} cannot be created ({e.strerror}); accepted: a writable directory") from None
+    if not os.access(output, os.W_OK | os.X_OK):
+        raise ValueError(f"--output {output} is not writable; accepted: a writable directory")
     progress = os.path.join(output, PROGRESS)
     if not resume:
         if os.path.exists(progress):

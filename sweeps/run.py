@@ -73,6 +73,22 @@ def check_storage(storage: str) -> None:
     if "://" in storage and not storage.startswith("file://"):
         raise ValueError(f"--storage {storage}: object stores are not supported yet; accepted: a filesystem path "
                          "(on a cluster, one every node mounts at the same place, e.g. NFS)")
+    path = Path(storage.removeprefix("file://")).resolve()
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    try:  # create it to know it can be (root passes os.access checks on /proc), then leave no trace
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".lac-write-probe-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as e:
+        raise ValueError(f"--storage {storage} is not a writable directory ({e.strerror}); "
+                         "accepted: a directory this user can create and write") from None
+    finally:
+        for p in missing:  # deepest first
+            try:
+                p.rmdir()
+            except OSError:
+                pass
 
 
 def check_shared(uri: str, storage: str) -> None:

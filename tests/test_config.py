@@ -77,6 +77,8 @@ def test_task_convention_feeds_cost_limit_and_discount():
     (["--set", "nosuch=1"], "unknown LAC config field 'nosuch'; accepted:"),
     (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
     (["--timesteps", "0"], "--timesteps 0 is invalid"),
+    (["--output", "/proc/x/out"], "--output /proc/x/out cannot be created"),
+    (["--checkpoint-every", "-1"], "--checkpoint-every -1 is invalid"),
 ])
 def test_cli_rejects_bad_input_before_ray_starts(tmp_path, args, needle):
     argv = [sys.executable, "-m", "lac_rllib.train", "--timesteps", "10", "--output", str(tmp_path), *args]

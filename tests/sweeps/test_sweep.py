@@ -199,6 +199,7 @@ def test_sigint_stops_cleanly_and_resume_completes_the_rest(tmp_path):
     (["--set", "nu_max_adaptive=2"], "nu_max_adaptive=2 is invalid; accepted: True | False"),
     (["--cpus-per-trial", "4096"], "--cpus-per-trial 4096 is more than this machine's"),
     (["--storage", "s3://bucket/sweeps"], "--storage s3://bucket/sweeps: object stores are not supported"),
+    (["--storage", "/proc/x/tune"], "--storage /proc/x/tune is not a writable directory"),
     (["--set", "no_such_field=1"], "unknown LAC config field 'no_such_field'"),
 ])
 def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
