@@ -79,7 +79,8 @@ def check_output(output: str, config: LACConfig, resume: bool) -> None:
     try:
         os.makedirs(output, exist_ok=True)
     except OSError as e:
-        raise ValueError(f"--output {output} cannot be created ({e.strerror}); accepted: a writable directory") from None
+        raise ValueError(f"--output {output} cannot be created ({e.strerror}); "
+                         "accepted: a writable directory") from None
     if not os.access(output, os.W_OK | os.X_OK):
         raise ValueError(f"--output {output} is not writable; accepted: a writable directory")
     progress = os.path.join(output, PROGRESS)

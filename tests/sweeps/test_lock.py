@@ -30,7 +30,8 @@ def test_second_driver_is_refused_and_a_dead_ones_lock_is_taken_over(tmp_path):
     (tmp_path / LOCK_FILE).write_text(json.dumps({"host": "elsewhere", "pid": 1, "heartbeat": time.time() - 5}))
     with pytest.raises(SweepLocked, match="host elsewhere pid 1"):
         DriverLock(tmp_path).acquire()
-    (tmp_path / LOCK_FILE).write_text(json.dumps({"host": "elsewhere", "pid": 1, "heartbeat": time.time() - STALE_S - 1}))
+    stale = time.time() - STALE_S - 1
+    (tmp_path / LOCK_FILE).write_text(json.dumps({"host": "elsewhere", "pid": 1, "heartbeat": stale}))
     with DriverLock(tmp_path) as lock:
         assert json.loads((tmp_path / LOCK_FILE).read_text())["pid"] == os.getpid() == lock.owner["pid"]
     # On this host: free at once when its process is gone.
