@@ -71,10 +71,11 @@ def test_restore_gives_full_module_and_frozen_filter(policy, checkpoint):
     assert float(m.nu) == pytest.approx(float(saved["nu"]))
     # The observation filter: the env runner's saved statistics, not updating.
     saved_filter = pickle.load(open(os.path.join(
-        checkpoint, "env_runner/env_to_module_connector/MeanStdFilter/state.pkl"), "rb"))
+        checkpoint, "env_runner/env_to_module_connector/FlooredMeanStdFilter/state.pkl"), "rb"))
     assert policy.obs_filter.get_state()[None]["running_stats"] == saved_filter[None]["running_stats"]
     assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["update_stats"] is False
     assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["clip_by_value"] == 5.0
+    assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["std_floor"] == 1e-2  # SPEC §5, kept frozen
 
 
 def test_restore_accepts_the_train_output_dir(checkpoint):
@@ -86,7 +87,7 @@ def test_preprocess_normalises_and_clips(policy):
 
     stats = RunningStat.from_state(policy.obs_filter.get_state()[None]["running_stats"][0])
     raw = np.array([[-1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 0.65], [50.0, 0, 0, 0, 0, 0, 0]], dtype=np.float32)
-    expected = np.clip((raw - stats.mean) / (stats.std + 1e-8), -5, 5)
+    expected = np.clip((raw - stats.mean) / np.maximum(stats.std, 1e-2), -5, 5)  # std floored (SPEC §5)
     np.testing.assert_allclose(policy.preprocess(raw).numpy(), expected, rtol=1e-4, atol=1e-4)
     assert policy.preprocess(raw).numpy()[1, 0] == 5.0  # clipped
 
