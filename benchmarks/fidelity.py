@@ -153,7 +153,7 @@ def final_table(df, task: str, order: list[str]) -> tuple[str, int]:
     limit = float(df["cost_limit"].iloc[0])
     if task in PAPER:
         (r, rs), (c, cs) = PAPER[task]
-        lines.append(f"| paper LAC, 2.5M steps | 10 | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
+        lines.append(f"| paper LAC, 2.5M steps | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
     for name, (r, rs), (c, cs) in OMNISAFE.get(task, []):
         lines.append(f"| {name} | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
     lines += ["", f"Cost limit {limit:g}."]
@@ -201,7 +201,7 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None) -> str
     budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
                        for (v, s), r in reached.iterrows())
     text = (f"# {task}: LAC learning curves\n\n"
-            f"Budget asked: {timesteps or 'see the commands'} env steps per run; reached:\n{budget}\n\n"
+            f"Budget per run: {f'{timesteps:,} env steps' if timesteps else 'see the commands'}; reached:\n{budget}\n\n"
             f"{table}\n\n![curves](curves.png)\n\nCommands:\n\n```\n" + "\n".join(commands) + "\n```\n")
     (out / "table.md").write_text(text)
     return text
