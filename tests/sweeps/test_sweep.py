@@ -110,22 +110,29 @@ def _cli(tmp_path, *extra, **kw):
     return subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
 
 
+def _wait_for_children(tmp_path, ready, timeout=300) -> list:
+    """Poll the running smoke sweep's child runs until ``ready(children)``; return them."""
+    deadline, children = time.time() + timeout, []
+    while time.time() < deadline:
+        time.sleep(2)
+        # sweep.json is written after the parent run exists: polling earlier could race the
+        # driver creating MLflow's tables.
+        if (tmp_path / "ray_results" / "smoke-PointHazard-v0-smoke" / "sweep.json").exists():
+            try:
+                _, _, children = _runs(tmp_path)
+            except Exception:  # noqa: BLE001 - the store may be mid-creation
+                continue
+            if ready(children):
+                break
+    return children
+
+
 def test_resume_after_driver_sigkill(tmp_path):
     proc = _cli(tmp_path, start_new_session=True)
-    deadline, finished = time.time() + 300, []
-    try:
-        while time.time() < deadline:  # wait for one finished trial and one started after it
-            time.sleep(2)
-            # sweep.json is written after the parent run exists: polling earlier could race the
-            # driver creating MLflow's tables.
-            if (tmp_path / "ray_results" / "smoke-PointHazard-v0-smoke" / "sweep.json").exists():
-                try:
-                    _, _, children = _runs(tmp_path)
-                except Exception:  # noqa: BLE001 - the store may be mid-creation
-                    continue
-                finished = [c for c in children if c.info.status == "FINISHED"]
-                if finished and len(children) >= 2:
-                    break
+    try:  # one finished trial and one started after it
+        children = _wait_for_children(
+            tmp_path, lambda cs: len(cs) >= 2 and any(c.info.status == "FINISHED" for c in cs))
+        finished = [c for c in children if c.info.status == "FINISHED"]
         assert finished, "no trial finished before the deadline"
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the driver and everything it started
@@ -151,18 +158,9 @@ def test_sigint_stops_cleanly_and_resume_completes_the_rest(tmp_path):
     import re
 
     proc = _cli(tmp_path, start_new_session=True)
-    deadline = time.time() + 300
-    try:
-        while time.time() < deadline:  # one trial finished and the next one running
-            time.sleep(2)
-            if (tmp_path / "ray_results" / "smoke-PointHazard-v0-smoke" / "sweep.json").exists():
-                try:
-                    _, _, children = _runs(tmp_path)
-                except Exception:  # noqa: BLE001 - the store may be mid-creation
-                    continue
-                if any(c.info.status == "FINISHED" for c in children) and any(
-                        c.info.status == "RUNNING" for c in children):
-                    break
+    try:  # one trial finished and the next one running
+        _wait_for_children(tmp_path, lambda cs: any(c.info.status == "FINISHED" for c in cs)
+                           and any(c.info.status == "RUNNING" for c in cs))
         proc.send_signal(signal.SIGINT)  # Ctrl-C
         out, _ = proc.communicate(timeout=180)
     finally:
