@@ -28,12 +28,12 @@ from ray.tune.registry import register_env
 
 from lac_rllib.config import LACConfig
 from lac_rllib.connectors import completed_episode_stats
-from lac_rllib.learner import TS_EPISODE_COST, TS_ITERATION
+from lac_rllib.learner import NU, TS_EPISODE_COST, TS_ITERATION
 from lac_rllib.tasks import get_task
 
 # Top-level result keys, declared once (the sweep service and the trainer read these).
-EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU = (
-    "episode_return", "episode_cost", "cost_limit", "feasible", "nu")
+# NU ("nu") is the learner's key, reported at the top level under the same name.
+EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE = ("episode_return", "episode_cost", "cost_limit", "feasible")
 EPISODES_THIS_ITER, ENV_STEPS = "episodes_this_iter", "env_steps"
 #: Version of the LAC keys in a checkpoint's rllib_checkpoint.json (see LAC.get_metadata).
 CHECKPOINT_FORMAT = 1
