@@ -7,7 +7,9 @@ Part 2, ``bench_sampling``: the same raw measurement, then steps/s of an LAC alg
 env runner (``num_env_runners=0``, one process): RLlib's vector env and episodes, the env-to-module
 connectors (MeanStdFilter on, as by default), the generator actor of the task's preset acting
 (exploration sampling), the episode-cost callback, the module-to-env connectors (action
-clipping). No learning. Both in the same run, with their ratio.
+clipping). No learning. Measured with one env per runner (the baseline) and with the preset's
+``num_envs_per_env_runner`` (8 for Safety-Gymnasium tasks), all in the same run, with the
+ratios to raw.
 
     python benchmarks/envs.py                       # raw + sampling, every task but CostProbe
     python benchmarks/envs.py --steps 5000 --tasks SafetyPointGoal1-v0 focops/AntVelocity-v0
@@ -80,8 +82,9 @@ def bench_sampling(task_ids: list[str] | None = None, steps: int = 3000, seed: i
     explore=True, random_actions=False)`` (the generator acts), no learning. Algorithm build,
     the first reset and ``warmup`` steps (connector/module warm-up) are not timed; later resets
     are, as in :func:`bench_raw`. Torch runs with 1 thread. Starts Ray (1 CPU) if needed.
-    Each row: task, steps, raw_steps_per_s, sampling_steps_per_s, ratio (sampling / raw),
-    sampling_episodes (completed in the timed sample). Prints a table, returns the rows.
+    Each row: task, steps, envs (the preset's envs per runner), raw_steps_per_s,
+    one_env_steps_per_s, sampling_steps_per_s (preset's envs), ratio_one_env and ratio (each
+    over raw), sampling_episodes (completed in the timed sample). Prints a table, returns the rows.
     """
     import ray
     import torch
@@ -94,40 +97,56 @@ def bench_sampling(task_ids: list[str] | None = None, steps: int = 3000, seed: i
     rows = []
     for task_id in task_ids or sampling_tasks():
         raw = _raw_row(task_id, steps, seed)
-        config = LACConfig().task(task_id).training(total_env_steps=steps).debugging(seed=seed).env_runners(num_env_runners=0)
-        algo = config.build_algo()
-        try:
-            runner = algo.env_runner
-            runner.sample(num_timesteps=warmup, explore=True, random_actions=False)
-            t0 = time.perf_counter()
-            episodes = runner.sample(num_timesteps=steps, explore=True, random_actions=False)
-            seconds = time.perf_counter() - t0
-        finally:
-            algo.stop()
-        sampled = sum(len(e) for e in episodes)
-        assert sampled == steps, f"{task_id}: sampled {sampled} steps, expected {steps}"
+        preset_envs = LACConfig().task(task_id).num_envs_per_env_runner
+        one, _ = _sampling_steps_per_s(task_id, steps, seed, warmup, num_envs=1)
+        many, episodes = (one, None) if preset_envs == 1 else _sampling_steps_per_s(
+            task_id, steps, seed, warmup, num_envs=preset_envs)
         row = {
             "task": task_id,
             "steps": steps,
+            "envs": preset_envs,
             "raw_steps_per_s": raw["steps_per_s"],
-            "sampling_steps_per_s": steps / seconds,
-            "sampling_episodes": sum(e.is_done for e in episodes),
+            "one_env_steps_per_s": one,
+            "sampling_steps_per_s": many,
         }
-        row["ratio"] = row["sampling_steps_per_s"] / row["raw_steps_per_s"]
+        row["ratio_one_env"] = one / raw["steps_per_s"]
+        row["ratio"] = many / raw["steps_per_s"]
         rows.append(row)
-        print(f"  {task_id}: raw {row['raw_steps_per_s']:,.0f} steps/s, sampling "
-              f"{row['sampling_steps_per_s']:,.0f} steps/s", flush=True)
+        print(f"  {task_id}: raw {raw['steps_per_s']:,.0f} steps/s, sampling {one:,.0f} (1 env) / "
+              f"{many:,.0f} ({preset_envs} envs) steps/s", flush=True)
     _print_sampling_table(rows)
     return rows
 
 
+def _sampling_steps_per_s(task_id: str, steps: int, seed: int, warmup: int, num_envs: int):
+    from lac_rllib.config import LACConfig
+
+    config = (LACConfig().task(task_id).training(total_env_steps=steps, num_envs_per_env_runner=num_envs)
+              .debugging(seed=seed).env_runners(num_env_runners=0))
+    algo = config.build_algo()
+    try:
+        runner = algo.env_runner
+        runner.sample(num_timesteps=warmup, explore=True, random_actions=False)
+        t0 = time.perf_counter()
+        episodes = runner.sample(num_timesteps=steps, explore=True, random_actions=False)
+        seconds = time.perf_counter() - t0
+    finally:
+        algo.stop()
+    sampled = sum(len(e) for e in episodes)
+    # A vector env stops at the first full round of its envs past ``steps``.
+    assert steps <= sampled < steps + num_envs, f"{task_id}: sampled {sampled} steps, expected {steps}"
+    return sampled / seconds, episodes
+
+
 def _print_sampling_table(rows: list[dict]) -> None:
-    header = f"{'task':<30} {'raw steps/s':>11} {'sampling steps/s':>16} {'ratio':>6} {'steps':>6}"
+    header = (f"{'task':<30} {'raw steps/s':>11} {'1 env':>8} {'ratio':>6} {'envs':>4} {'N envs':>8} "
+              f"{'ratio':>6} {'steps':>6}")
     print(header)
     print("-" * len(header))
     for r in rows:
-        print(f"{r['task']:<30} {r['raw_steps_per_s']:>11,.0f} {r['sampling_steps_per_s']:>16,.0f} "
-              f"{r['ratio']:>6.2f} {r['steps']:>6}")
+        print(f"{r['task']:<30} {r['raw_steps_per_s']:>11,.0f} {r['one_env_steps_per_s']:>8,.0f} "
+              f"{r['ratio_one_env']:>6.2f} {r['envs']:>4} {r['sampling_steps_per_s']:>8,.0f} {r['ratio']:>6.2f} "
+              f"{r['steps']:>6}")
 
 
 def _print_table(rows: list[dict]) -> None:

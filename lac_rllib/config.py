@@ -15,6 +15,7 @@ from typing import Any
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
+from lac_rllib.fused_energy import DTYPES as LANGEVIN_DTYPES
 from lac_rllib.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
 
@@ -49,6 +50,16 @@ class LACParams:
     """"batch": one L2 norm over the whole minibatch's ∇_a E (B × A) [C]; "per_sample": each
     sample's gradient clipped to langevin_grad_clip/√B, the same step when gradients are alike
     without coupling unrelated samples [D]."""
+    langevin_fused: bool = True
+    """Each chain step's energy gradient through torch.compile, which fuses the element-wise work
+    of every critic layer [D]: same maths to float rounding, the chain ~1.3-1.5x faster at the
+    paper's sizes, for a one-off compile of ~15-40 s per process (README, speed). False: the eager
+    hand-written backward. Falls back to it, with a warning, where compiling fails."""
+    langevin_dtype: str = "float32"
+    """Input dtype of the chain's critic matmuls: "float32" | "bfloat16" (action, energy and update
+    stay float32) [D]. bfloat16 pays only on CPUs with native bf16 matmuls (AVX512-BF16, AMX);
+    on AVX2-only CPUs it is far slower. Its end points differ from float32's by far less than the
+    chain's own noise (tests/test_fused_energy.py)."""
 
     # --- critics (SPEC §2, eqs. 12-13) ---
     cost_gamma: float = 0.99
@@ -116,6 +127,13 @@ class LACParams:
     total_env_steps: int | None = None
     """The run's budget in env steps, the horizon of the linear lr decay. lac-train and the sweep
     set it from their budget; required when lr_schedule is "linear"."""
+    num_envs_per_env_runner: int = 1
+    """Envs each env runner steps together (RLlib's own field, a gymnasium SyncVectorEnv) [D]:
+    RLlib's per-step work (connectors, episode bookkeeping) is then paid once per batch of envs
+    instead of once per step. The policy is fixed within an iteration, so this changes only which
+    episode segments an iteration holds. The presets choose counts that keep the episodes of an
+    iteration what one env gives: 1000-step episodes, 20k steps over 10 envs (safety_gym) and 5k
+    over 5 (mujoco) complete 20 and 5 whole episodes per iteration. docs/speed.md has the figures."""
     random_iterations: int = 5
     """Iterations that act uniformly at random before the generator takes over [C]."""
     obs_normalization: bool = True
@@ -163,8 +181,8 @@ def field_docs() -> dict[str, str]:
 # nothing is learned (seed 0: return −9.5, random −10.1); unclipped, the same run ends at return
 # −0.9 and cost 0 (limit 2). The clip's effect at the paper's sizes is in docs/fidelity/.
 PRESETS: dict[str, dict[str, Any]] = {
-    "mujoco": {"env_steps_per_iteration": 5000},
-    "safety_gym": {"env_steps_per_iteration": 20_000},
+    "mujoco": {"env_steps_per_iteration": 5000, "num_envs_per_env_runner": 5},
+    "safety_gym": {"env_steps_per_iteration": 20_000, "num_envs_per_env_runner": 10},
     "tiny": {
         "env_steps_per_iteration": 1000,
         "replay_capacity": 10_000,
@@ -174,6 +192,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "random_iterations": 2,
         "nu_lr": 0.03,
         "langevin_grad_clip": None,
+        # A compile costs more than a tiny run's whole chain time.
+        "langevin_fused": False,
     },
 }
 
@@ -191,7 +211,7 @@ def check_field(name: str, value: Any) -> None:
                 "gradient_passes"}
     non_negative = {"logp_weight", "beta", "nu_init", "nu_lr", "reward_scale", "obs_std_floor"}
     pos_int = {"langevin_steps", "env_steps_per_iteration", "replay_capacity", "lac_minibatch_size",
-               "torch_threads"}
+               "torch_threads", "num_envs_per_env_runner"}
     if name in pos_int and not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
         bad("an integer >= 1")
     if name in positive and not (real(value) and value > 0):
@@ -222,11 +242,14 @@ def check_field(name: str, value: Any) -> None:
         bad(" | ".join(GRAD_CLIP_MODES))
     if name == "lr_schedule" and value not in LR_SCHEDULES:
         bad(" | ".join(LR_SCHEDULES))
+    if name == "langevin_dtype" and value not in LANGEVIN_DTYPES:
+        bad(" | ".join(LANGEVIN_DTYPES))
     if name == "total_env_steps" and value is not None and not (
         isinstance(value, int) and not isinstance(value, bool) and value >= 1
     ):
         bad("None or an integer >= 1")
-    if name in ("nu_max_adaptive", "polyak_from_actor_start", "langevin_clamp", "obs_normalization",
+    if name in ("nu_max_adaptive", "polyak_from_actor_start", "langevin_fused", "langevin_clamp",
+                "obs_normalization",
                 "bootstrap_on_truncation", "store_replay_buffer") and not isinstance(value, bool):
         bad("True | False")
     if name in ("actor_hidden", "critic_hidden") and not (
