@@ -25,6 +25,7 @@ from typing import Callable
 
 import torch
 
+from lac_rllib.fused_energy import make_grad_fn
 from lac_rllib.networks import CriticEnsemble
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
@@ -162,11 +163,14 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
                    nu, logp_weight: float = 1.0, start: str = "informative", low=None, high=None,
                    grad_clip: float | None = None, grad_clip_mode: str = "batch",
                    noise: torch.Tensor | None = None,
-                   generator: torch.Generator | None = None) -> ChainResult:
+                   generator: torch.Generator | None = None, fused: bool = False,
+                   dtype: str = "float32") -> ChainResult:
     """Algorithm 1 at states ``obs``; ``mean``/``log_std`` are the TARGET actor's π_φ'(·|s).
 
     ``noise`` (optional, for reproducible comparisons) is (T+1, B, A): ``noise[0]`` is z₀ of the
     start, ``noise[1:]`` the step noise; otherwise all noise is drawn from ``generator``.
+    ``fused``: each step's energy gradient through torch.compile (lac_rllib.fused_energy);
+    ``dtype``: the critics' matmuls in "float32" or "bfloat16" (the action stays float32).
     """
     _check_chain_args(steps, step_size, grad_clip, grad_clip_mode)
     if not temperature > 0:
@@ -185,8 +189,12 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
         # eq. (11): start from the generator's own sample; NI: start from N(0, I).
         a0 = mean + torch.exp(log_std) * z0 if start == "informative" else z0
         proj = critics.project_state(obs)
-        grad_fn = lac_energy_and_grad(critics, proj, mean, log_std, temperature=temperature,
-                                      nu=nu, logp_weight=logp_weight)
+        if fused or dtype != "float32":
+            grad_fn = make_grad_fn(critics, proj, mean, log_std, temperature=temperature, nu=nu,
+                                   logp_weight=logp_weight, compiled=fused, dtype=dtype)
+        else:
+            grad_fn = lac_energy_and_grad(critics, proj, mean, log_std, temperature=temperature,
+                                          nu=nu, logp_weight=logp_weight)
         return run_chain(grad_fn, a0, steps=steps, step_size=step_size,
                          noise=None if noise is None else noise[1:], generator=generator,
                          low=low, high=high, grad_clip=grad_clip, grad_clip_mode=grad_clip_mode)

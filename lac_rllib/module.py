@@ -103,6 +103,8 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
             low=self._low if clamp else None, high=self._high if clamp else None,
             grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
             generator=generator,
+            # Checkpoints written before these fields existed ran the eager float32 chain.
+            fused=cfg.get("langevin_fused", False), dtype=cfg.get("langevin_dtype", "float32"),
         )
 
     # ----- RLlib APIs -----
