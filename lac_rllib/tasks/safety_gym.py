@@ -27,12 +27,14 @@ env_config keys understood by :func:`make_env`: ``env_id`` (set by the task's kw
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from lac_rllib.tasks import light_resets
 from lac_rllib.tasks.registry import MUJOCO, SAFETY_GYM, TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.safety_gym:make_env"
@@ -46,8 +48,10 @@ class SafetyToGymnasium(gym.Wrapper):
     accepted in a float32 Box and handed to the inner env in its own dtype.
     """
 
-    def __init__(self, env: gym.Env) -> None:
+    def __init__(self, env: gym.Env, light_resets: bool = False) -> None:
         super().__init__(env)
+        # Navigation resets without the render-only skybox (lac_rllib.tasks.light_resets).
+        self._light_resets = light_resets
         obs_space, act_space = env.observation_space, env.action_space
         if not (isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1):
             raise TypeError(f"expected a flat Box observation space, got {obs_space}")
@@ -60,7 +64,8 @@ class SafetyToGymnasium(gym.Wrapper):
         self._inner_action_dtype = act_space.dtype
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
+        with light_resets.light() if self._light_resets else contextlib.nullcontext():
+            obs, info = self.env.reset(seed=seed, options=options)
         return np.asarray(obs, dtype=np.float32), info
 
     def step(self, action: Any):
@@ -86,6 +91,7 @@ def make_env(env_config: dict | None = None) -> gym.Env:
     if env_id not in _SAFETY_IDS:
         raise ValueError(f"unknown Safety-Gymnasium task {env_id!r}; known: {sorted(_SAFETY_IDS)}")
     safety_gym_compat.apply()
+    light_resets.install()
     from safety_gymnasium.utils.registration import make as safety_make
 
     kwargs = {}
@@ -100,7 +106,7 @@ def make_env(env_config: dict | None = None) -> gym.Env:
             max_episode_steps=int(cfg.get("max_episode_steps", MAX_EPISODE_STEPS)),
             **kwargs,
         )
-        return SafetyToGymnasium(inner)
+        return SafetyToGymnasium(inner, light_resets=cfg.get("render_mode") is None)
 
 
 def _nav(env_id: str, obs_dim: int, hazards: str, overrides: dict | None = None) -> TaskSpec:
