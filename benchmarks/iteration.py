@@ -1,0 +1,195 @@
+"""Wall time of one LAC iteration, split into phases, for today's path and a baseline, same run.
+
+    python benchmarks/iteration.py                                  # PointGoal1 and Humanoid presets
+    python benchmarks/iteration.py --tasks SafetyPointGoal1-v0 --out docs/speed/iteration.md
+
+One iteration at a task's preset (``env_steps_per_iteration`` steps sampled by the generator, then
+one pass of minibatches over a full replay buffer: 195 minibatches of 256 from 50k rows, each
+with a T-step chain), on one CPU (Ray with 1 CPU, ``num_env_runners=0``, one torch thread).
+Before the timed iteration the buffer is filled to capacity minus one iteration with copies of
+one iteration of random-action episodes, and one chain runs at the training shapes so that a
+compile (``langevin_fused``) is paid before the clock starts (neither is timed): the pass has its
+steady-state length and cost.
+
+Phases (wall seconds):
+- env: the envs' own ``step``/``reset`` (timed around each sub-env's calls);
+- sampling machinery: the rest of the env runner's ``sample`` (RLlib connectors, episodes, actor);
+- chain: the Langevin chains inside the learner;
+- update: the rest of ``learner_group.update`` (learner connectors, critic/actor losses, backward,
+  Adam, Polyak);
+- other: the rest of ``algo.train()`` (replay buffer, weight sync, metrics).
+
+Configurations, each built fresh on the same task, seed and buffer contents:
+- ``baseline``: the path before the speed work: one env per runner, eager float32 chain;
+- ``current``: the defaults (the preset's vector env, fused chain).
+``--variant NAME:field=value,...`` adds others (e.g. ``bf16:langevin_dtype=bfloat16``).
+Prints a table with each phase's ratio baseline / current and writes it to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import functools
+import sys
+import time
+import uuid
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
+
+PHASES = ("env", "sampling machinery", "chain", "update", "other", "total")
+BASELINE = {"num_envs_per_env_runner": 1, "langevin_fused": False, "langevin_dtype": "float32"}
+DEFAULT_TASKS = ("SafetyPointGoal1-v0", "focops/HumanoidVelocity-v0")
+
+
+class _Clock:
+    """Accumulates wall time of wrapped callables by phase name."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+
+    def wrap(self, name: str, fn):
+        @functools.wraps(fn)
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+
+        return timed
+
+
+def _sub_envs(runner):
+    env = runner.env
+    while not hasattr(env, "envs"):  # RLlib's DictInfoToList around gymnasium's SyncVectorEnv
+        env = env.env
+    return env.envs
+
+
+def prefill_episodes(task: str, seed: int):
+    """One iteration of random-action episodes at the preset (copied to fill the buffer)."""
+    from lac_rllib.train import build_config
+
+    config = build_config(task, seed, {"num_envs_per_env_runner": 1}, timesteps=10**9)
+    algo = config.build_algo()
+    try:
+        episodes = algo.env_runner.sample(num_timesteps=config.env_steps_per_iteration, random_actions=True)
+        for e in episodes:
+            e.extra_model_outputs.clear()
+        # The filtered observations in these episodes were normalised by this runner's filter;
+        # hand its state over with them, as a resumed run would.
+        return episodes, algo.env_runner.get_state(), config.replay_capacity, config.env_steps_per_iteration
+    finally:
+        algo.stop()
+
+
+def _warm_up_chain(algo, config) -> None:
+    """One chain at the training shapes, so a compile (langevin_fused) is not timed as work."""
+    import torch
+    from ray.rllib.core import DEFAULT_MODULE_ID
+
+    module = algo.learner_group._learner.module[DEFAULT_MODULE_ID]
+    obs = torch.zeros(config.lac_minibatch_size, module.actor.mean_net[0].in_features)
+    with torch.no_grad():
+        mean, log_std = module.target_actor(obs)
+        module.langevin(obs, mean, log_std)
+
+
+def time_iteration(task: str, sets: dict, seed: int, prefill) -> dict[str, float]:
+    """Seconds per phase of one ``algo.train()`` with ``sets`` on top of the defaults."""
+    import lac_rllib.module as module_mod
+    from lac_rllib.train import build_config
+
+    episodes, runner_state, capacity, per_iteration = prefill
+    sets = {"random_iterations": 0, "actor_update_start_iteration": 0, **sets}
+    config = build_config(task, seed, sets, timesteps=10**9)
+    algo = config.build_algo()
+    clock = _Clock()
+    original_chain = module_mod.langevin_chain
+    try:
+        algo.env_runner.set_state({k: v for k, v in runner_state.items() if "connector" in k})
+        rows = 0
+        while rows < capacity - per_iteration:  # copies with fresh ids: the buffer's steady state
+            for e in episodes:
+                dup = copy.deepcopy(e)
+                dup.id_ = uuid.uuid4().hex
+                algo.replay_buffer.add([dup])
+                rows += len(dup)
+        _warm_up_chain(algo, config)
+        for env in _sub_envs(algo.env_runner):
+            env.step, env.reset = clock.wrap("env", env.step), clock.wrap("env", env.reset)
+        algo.env_runner.sample = clock.wrap("sampling", algo.env_runner.sample)
+        algo.learner_group.update = clock.wrap("learner", algo.learner_group.update)
+        module_mod.langevin_chain = clock.wrap("chain", original_chain)
+        t0 = time.perf_counter()
+        algo.train()
+        total = time.perf_counter() - t0
+    finally:
+        module_mod.langevin_chain = original_chain
+        algo.stop()
+    s = clock.seconds
+    return {"env": s["env"], "sampling machinery": s["sampling"] - s["env"], "chain": s["chain"],
+            "update": s["learner"] - s["chain"], "other": total - s["sampling"] - s["learner"], "total": total}
+
+
+def table(task: str, results: dict[str, dict[str, float]]) -> str:
+    names = list(results)
+    lines = [f"### {task}", "", "| phase | " + " | ".join(f"{n} (s)" for n in names) + " | baseline / current |",
+             "|---|" + "---:|" * (len(names) + 1)]
+    for phase in PHASES:
+        vals = [results[n][phase] for n in names]
+        now = results["current"][phase]
+        ratio = results["baseline"][phase] / now if now > 0 else float("nan")
+        lines.append(f"| {phase} | " + " | ".join(f"{v:.1f}" for v in vals) + f" | {ratio:.2f}x |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--tasks", nargs="+", default=list(DEFAULT_TASKS))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--variant", action="append", default=[], metavar="NAME:F=V,...",
+                        help="another configuration to time (lac-train --set syntax)")
+    parser.add_argument("--out", default=None, help="also write the tables (markdown) here")
+    args = parser.parse_args(argv)
+    from lac_rllib.tasks import get_task
+    from lac_rllib.train import parse_sets
+
+    variants = {"baseline": BASELINE, "current": {}}
+    try:
+        for task in args.tasks:
+            get_task(task)
+        for text in args.variant:
+            name, _, pairs = text.partition(":")
+            variants[name] = parse_sets([p for p in pairs.split(",") if p])
+    except ValueError as e:
+        parser.exit(2, f"iteration: error: {e}\n")
+
+    import ray
+    import torch
+
+    from lac_rllib.tasks.versions import runtime_versions
+
+    torch.set_num_threads(1)
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    out = [f"One LAC iteration per configuration, one CPU. {runtime_versions()}, "
+           f"torch {torch.__version__}, CPU capability {torch.backends.cpu.get_cpu_capability()}.", ""]
+    for task in args.tasks:
+        prefill = prefill_episodes(task, args.seed)
+        results = {}
+        for name, sets in variants.items():
+            results[name] = time_iteration(task, sets, args.seed, prefill)
+            print(f"{task} {name}: " + ", ".join(f"{k} {v:.1f}s" for k, v in results[name].items()), flush=True)
+        text = table(task, results)
+        print("\n" + text + "\n", flush=True)
+        out += [text, ""]
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text("\n".join(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
