@@ -20,7 +20,8 @@ Phases (wall seconds):
 - other: the rest of ``algo.train()`` (replay buffer, weight sync, metrics).
 
 Configurations, each built fresh on the same task, seed and buffer contents:
-- ``baseline``: the path before the speed work: one env per runner, eager float32 chain;
+- ``baseline``: the path before the speed work: one env per runner, eager float32 chain, stock
+  Safety-Gymnasium resets (env_config ``light_resets=False``);
 - ``current``: the defaults (the preset's vector env, fused chain).
 ``--variant NAME:field=value,...`` adds others (e.g. ``bf16:langevin_dtype=bfloat16``).
 Prints a table with each phase's ratio baseline / current and writes it to ``--out``.
@@ -40,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 
 PHASES = ("env", "sampling machinery", "chain", "update", "other", "total")
 BASELINE = {"num_envs_per_env_runner": 1, "langevin_fused": False, "langevin_dtype": "float32"}
+BASELINE_ENV_CONFIG = {"light_resets": False}  # stock Safety-Gymnasium resets
 DEFAULT_TASKS = ("SafetyPointGoal1-v0", "focops/HumanoidVelocity-v0")
 
 
@@ -97,7 +99,7 @@ def _warm_up_chain(algo, config) -> None:
         module.langevin(obs, mean, log_std)
 
 
-def time_iteration(task: str, sets: dict, seed: int, prefill) -> dict[str, float]:
+def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict | None = None) -> dict[str, float]:
     """Seconds per phase of one ``algo.train()`` with ``sets`` on top of the defaults."""
     import lac_rllib.module as module_mod
     from lac_rllib.train import build_config
@@ -105,6 +107,8 @@ def time_iteration(task: str, sets: dict, seed: int, prefill) -> dict[str, float
     episodes, runner_state, capacity, per_iteration = prefill
     sets = {"random_iterations": 0, "actor_update_start_iteration": 0, **sets}
     config = build_config(task, seed, sets, timesteps=10**9)
+    if env_config:
+        config.environment(env_config={**config.env_config, **env_config})
     algo = config.build_algo()
     clock = _Clock()
     original_chain = module_mod.langevin_chain
@@ -180,7 +184,8 @@ def main(argv=None) -> int:
         prefill = prefill_episodes(task, args.seed)
         results = {}
         for name, sets in variants.items():
-            results[name] = time_iteration(task, sets, args.seed, prefill)
+            results[name] = time_iteration(task, sets, args.seed, prefill,
+                                           BASELINE_ENV_CONFIG if name == "baseline" else None)
             print(f"{task} {name}: " + ", ".join(f"{k} {v:.1f}s" for k, v in results[name].items()), flush=True)
         text = table(task, results)
         print("\n" + text + "\n", flush=True)

@@ -21,8 +21,9 @@ The ids are the same as safety_gymnasium's. Our registrations win in gymnasium's
 Importing this module is cheap: mujoco and safety_gymnasium are imported by the factory only.
 
 env_config keys understood by :func:`make_env`: ``env_id`` (set by the task's kwargs),
-``max_episode_steps`` (default 1000), ``render_mode`` (default None). Other keys (e.g. RLlib's
-``num_envs``) are ignored.
+``max_episode_steps`` (default 1000), ``render_mode`` (default None), ``light_resets`` (default
+True: navigation resets skip the render-only skybox when there is no render_mode,
+lac_rllib.tasks.light_resets). Other keys (e.g. RLlib's ``num_envs``) are ignored.
 """
 
 from __future__ import annotations
@@ -106,7 +107,8 @@ def make_env(env_config: dict | None = None) -> gym.Env:
             max_episode_steps=int(cfg.get("max_episode_steps", MAX_EPISODE_STEPS)),
             **kwargs,
         )
-        return SafetyToGymnasium(inner, light_resets=cfg.get("render_mode") is None)
+        light = bool(cfg.get("light_resets", True)) and cfg.get("render_mode") is None
+        return SafetyToGymnasium(inner, light_resets=light)
 
 
 def _nav(env_id: str, obs_dim: int, hazards: str, overrides: dict | None = None) -> TaskSpec:

@@ -48,7 +48,7 @@ def test_trajectories_across_resets_are_bit_identical_to_stock(task_id):
     assert _digest(rows_ours) == _digest(rows_stock)
 
 
-def test_light_models_lack_only_the_skybox_and_rendering_envs_keep_it():
+def test_light_models_lack_only_the_skybox_and_rendering_or_opted_out_envs_keep_it():
     light = get_task("SafetyPointGoal1-v0").make()
     light.reset(seed=0)
     rendering = get_task("SafetyPointGoal1-v0").make({"render_mode": "rgb_array"})
@@ -56,6 +56,9 @@ def test_light_models_lack_only_the_skybox_and_rendering_envs_keep_it():
     m_light, m_stock = light.unwrapped.task.model, rendering.unwrapped.task.model
     pixels = lambda m: [int(w) * int(h) for w, h in zip(m.tex_width, m.tex_height)]  # noqa: E731
     assert max(pixels(m_stock)) > 10**6, "the rendering env lost its skybox"
+    off = get_task("SafetyPointGoal1-v0").make({"light_resets": False})
+    off.reset(seed=0)
+    assert pixels(off.unwrapped.task.model) == pixels(m_stock), "light_resets=False must keep the stock path"
     assert pixels(m_light)[0] == 6 and pixels(m_light)[1:] == pixels(m_stock)[1:]  # 1 pixel per cube face
     for field in ("body_pos", "body_quat", "body_mass", "body_invweight0", "dof_invweight0", "qpos0",
                   "geom_size", "geom_pos", "geom_rbound"):
