@@ -393,3 +393,6 @@ class LACConfig(AlgorithmConfig):
 
 
 FIELD_NAMES = frozenset(f.name for f in dataclasses.fields(LACParams))
+#: Fields that set how fast a run goes, not the algorithm: a resumed run may change them (a
+#: run started before they existed resumes with today's values).
+SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})

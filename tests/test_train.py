@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from lac_rllib.train import PROGRESS, build_config, train
+from lac_rllib.train import CONFIG, PROGRESS, build_config, check_output, run_config, train
 
 TINY = ["--set", "env_steps_per_iteration=500", "--set", "replay_capacity=2000", "--set", "random_iterations=1"]
 
@@ -59,3 +59,17 @@ def test_a_stopped_run_resumes_from_its_last_checkpoint(ray_session, tmp_path):
     assert summary["env_steps"] == 2500 and summary["iterations"] == 5
     assert all(rows[i]["time_s"] < rows[i + 1]["time_s"] for i in range(4))
 
+
+
+def test_resume_may_change_speed_fields_only(tmp_path):
+    """A run started before the speed fields existed (or with other values) resumes; a change
+    of what is learned is refused, naming the field."""
+    config = build_config("lac/PointHazard-v0", 0, {}, timesteps=1000)
+    started = {k: v for k, v in run_config(config).items() if k not in ("langevin_fused", "num_envs_per_env_runner")}
+    started["torch_threads"] = 2
+    (tmp_path / CONFIG).write_text(json.dumps(started))
+    (tmp_path / "checkpoint").mkdir()
+    check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 4}, timesteps=1000),
+                 resume=True)
+    with pytest.raises(ValueError, match=r"started with other settings: beta=0.0 \(now 0.5\)$"):
+        check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"beta": 0.5}, timesteps=1000), resume=True)
