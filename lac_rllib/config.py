@@ -396,3 +396,6 @@ FIELD_NAMES = frozenset(f.name for f in dataclasses.fields(LACParams))
 #: Fields that set how fast a run goes, not the algorithm: a resumed run may change them (a
 #: run started before they existed resumes with today's values).
 SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
+#: Fields added after runs and checkpoints already existed, with the value that reproduces what
+#: such a run did (read where an old run's settings or an old checkpoint's model config lack them).
+LEGACY_VALUES = {"langevin_fused": False, "langevin_dtype": "float32", "num_envs_per_env_runner": 1}

@@ -22,6 +22,7 @@ from ray.rllib.core.learner.utils import make_target_network
 from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 
+from lac_rllib.config import LEGACY_VALUES
 from lac_rllib.langevin import ChainResult, langevin_chain
 from lac_rllib.networks import CriticEnsemble, GaussianActor
 
@@ -104,7 +105,8 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
             grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
             generator=generator,
             # Checkpoints written before these fields existed ran the eager float32 chain.
-            fused=cfg.get("langevin_fused", False), dtype=cfg.get("langevin_dtype", "float32"),
+            fused=cfg.get("langevin_fused", LEGACY_VALUES["langevin_fused"]),
+            dtype=cfg.get("langevin_dtype", LEGACY_VALUES["langevin_dtype"]),
         )
 
     # ----- RLlib APIs -----

@@ -17,7 +17,7 @@ import shutil
 import sys
 import time
 
-from lac_rllib.config import FIELD_NAMES, SPEED_FIELDS, LACConfig, field_docs
+from lac_rllib.config import FIELD_NAMES, LEGACY_VALUES, SPEED_FIELDS, LACConfig, field_docs
 from lac_rllib.tasks import known_tasks
 
 
@@ -94,6 +94,7 @@ def check_output(output: str, config: LACConfig, resume: bool) -> None:
     with open(os.path.join(output, CONFIG)) as f:
         old = json.load(f)
     new = run_config(config)
+    old = {**LEGACY_VALUES, **old}
     diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in SPEED_FIELDS)
     if diff:
         raise ValueError("--resume: the run in {} was started with other settings: {}".format(
