@@ -165,6 +165,25 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print, checkpoi
             "versions": runtime_versions()}
 
 
+def start_ray(num_cpus: int, attempts: int = 3) -> None:
+    """A local Ray instance. Ray gives its raylet a fixed 30 s to register; on a machine whose
+    cores are taken (several niced runs at once) that fails now and then, so try again."""
+    import ray
+
+    for attempt in range(1, attempts + 1):
+        try:
+            ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False,
+                     configure_logging=True, logging_level="ERROR")
+            return
+        except Exception as e:  # noqa: BLE001  (Ray raises a bare Exception for this)
+            if "timed out during startup" not in str(e) or attempt == attempts:
+                raise
+            print(f"lac-train: Ray's node did not start in time (attempt {attempt}/{attempts}); retrying",
+                  file=sys.stderr, flush=True)
+            ray.shutdown()
+            time.sleep(10 * attempt)
+
+
 def main(argv: list[str] | None = None) -> int:
     docs = field_docs()
     parser = argparse.ArgumentParser(
@@ -193,10 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         check_output(args.output, config, args.resume)
     except ValueError as e:
         parser.exit(2, f"lac-train: error: {e}\n")
-    import ray
-
-    ray.init(num_cpus=max(2, args.num_env_runners + 1), include_dashboard=False, log_to_driver=False,
-             configure_logging=True, logging_level="ERROR")
+    start_ray(num_cpus=max(2, args.num_env_runners + 1))
     summary = train(config, args.timesteps, args.output, checkpoint_every=args.checkpoint_every, resume=args.resume)
     print(json.dumps(summary, default=str), flush=True)
     return 0

@@ -52,6 +52,14 @@ def test_spec_defaults_and_presets():
     assert LACConfig().task("SafetyPointGoal1-v0").env_steps_per_iteration == 20_000  # Table 5
     assert LACConfig().task("focops/AntVelocity-v0").env_steps_per_iteration == 5_000  # Table 4
     assert LACConfig().task("SafetyPointButton1-v0").langevin_steps == 50  # Table 5, Button
+    # Speed: vector envs whose episodes tile an iteration (1000-step episodes), the fused chain
+    # except in the tiny preset; both are RLlib/LAC fields a run reports.
+    for task, envs, fused in (("SafetyPointGoal1-v0", 10, True), ("focops/AntVelocity-v0", 5, True),
+                              ("lac/PointHazard-v0", 1, False)):
+        c = LACConfig().task(task)
+        assert (c.num_envs_per_env_runner, c.langevin_fused, c.langevin_dtype) == (envs, fused, "float32")
+        assert c.env_steps_per_iteration % (envs * 1000) == 0 or task == "lac/PointHazard-v0"
+        assert c.lac_params()["num_envs_per_env_runner"] == envs
     # explicit values win over the preset
     assert LACConfig().task("SafetyPointGoal1-v0").training(env_steps_per_iteration=7).env_steps_per_iteration == 7
 

@@ -26,6 +26,9 @@ SMALL = dict(
     # nn.Linear's head: the seeds below were chosen for a generator whose first actions reach the
     # hazards; the default ×0.1 head acts near 0 and (seed 5, PointGoal1) never touches one.
     actor_mean_init_scale=None,
+    # One env per runner: the replay below walks the episodes in sampling order (vector envs are
+    # checked on the cost probe, tests/test_algorithm.py); no compile for a 2-step 32-wide chain.
+    num_envs_per_env_runner=1, langevin_fused=False,
 )
 
 # Navigation: 2 iterations of 500 steps, 400-step episodes. Episodes [0, 400) and [400, 800)
