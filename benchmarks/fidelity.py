@@ -57,6 +57,7 @@ CURVE_KEYS = ("env_steps", "episode_return", "episode_cost", "cost_limit", "nu",
               "langevin_at_bound", "langevin_clip_fraction", "langevin_grad_norm", "actor_std_mean",
               "time_s")
 TAIL = 0.10  # the final 10% of the env steps
+RAY_STARTUP_S = 120  # a run is niced this long after its start (its Ray is up by then)
 
 
 def parse_variant(text: str) -> tuple[str, list[str]]:
@@ -75,7 +76,7 @@ def run_dir(out: Path, variant: str, seed: int) -> Path:
     return out / "runs" / variant / f"seed{seed}"
 
 
-def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int, nice: int,
+def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int,
            resume: bool = False, checkpoint_every: int = 2):
     from lac_rllib.train import resumable_checkpoint
 
@@ -93,16 +94,20 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
     (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]).replace(" --resume", "") + "\n")
     log = open(d / "train.log", "a" if "--resume" in cmd else "w")
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    proc = subprocess.Popen(["nice", "-n", str(nice), *cmd], stdout=log, stderr=subprocess.STDOUT, env=env,
-                            cwd=ROOT, start_new_session=True)
-    # With autogroup scheduling (Linux's default), CPU is shared between sessions first and
-    # niceness only counts inside a session: a new session at nice 10 would still take an equal
-    # share against interactive work. Nice the session's group too, where the kernel has one.
+    # Started at normal priority: Ray gives its raylet a fixed 30 s to register, which a niced
+    # start on a busy machine misses; the run is niced once Ray is up (lower_priority).
+    return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=ROOT, start_new_session=True)
+
+
+def lower_priority(proc, nice: int) -> None:
+    """Nice a run and its session. With autogroup scheduling (Linux's default) CPU is shared
+    between sessions first and niceness only counts inside one: a session at nice 10 would
+    still take an equal share against interactive work, so the session's group is niced too."""
     try:
+        os.setpriority(os.PRIO_PROCESS, proc.pid, nice)
         Path(f"/proc/{proc.pid}/autogroup").write_text(str(nice))
     except OSError:
         pass
-    return proc
 
 
 def load_curves(out: Path):
@@ -260,10 +265,14 @@ def main(argv=None) -> int:
         while queue or running:
             while queue and len(running) < args.parallel:
                 v, pairs, s = queue.pop(0)
-                running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.nice,
-                                             args.resume, args.checkpoint_every)))
+                running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.resume,
+                                             args.checkpoint_every), time.time()))
                 print(f"started {v} seed {s}", flush=True)
             time.sleep(5)
+            for item in running:
+                if len(item) == 4 and time.time() - item[3] > RAY_STARTUP_S:
+                    lower_priority(item[2], args.nice)
+                    running[running.index(item)] = item[:3]
             for item in [r for r in running if r[2].poll() is not None]:
                 running.remove(item)
                 print(f"finished {item[0]} seed {item[1]} (exit {item[2].returncode})", flush=True)
@@ -271,8 +280,8 @@ def main(argv=None) -> int:
                 report(out, args.task, order, args.timesteps)
                 last = time.time()
     except KeyboardInterrupt:
-        for *_, proc in running:
-            os.killpg(proc.pid, 15)
+        for item in running:
+            os.killpg(item[2].pid, 15)
     print(report(out, args.task, order, args.timesteps) or "no runs produced a curve")
     return 0
 
