@@ -38,14 +38,19 @@ class Budget:
 
 BUDGETS: dict[str, Budget] = {
     "smoke": Budget(2_000, {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
-                            "actor_hidden": (32, 32), "critic_hidden": (32, 32)},
+                            "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1,
+                            "langevin_fused": False},
                     "seconds per trial: proves the machinery, learns nothing"),
     # 64-wide networks: with the paper's 256-wide critics one T = 500 chain costs ~8 s per
     # gradient step here (benchmarks/langevin.py), which no 30-minute ablation can afford.
     # At 10k steps the default ablation took 18.4 min here; 16k (~1.8x the sampling and gradient
     # steps) aims at the middle of the 30-45 min the sweep issue asks for.
+    # One env and the eager chain: 2k-step iterations of 1000-step episodes need a single env to
+    # complete episodes every iteration (10 envs would finish none for 5 iterations), and a
+    # trial this short cannot repay a compile (~15-40 s per process).
     "quick": Budget(16_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
-                             "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64)},
+                             "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                             "num_envs_per_env_runner": 1, "langevin_fused": False},
                     "sized so the default ablation (48 trials) takes ~30-45 min on 2 cores"),
     "paper": Budget(2_500_000, {}, "the paper's 2.5M env steps with the SPEC presets"),
 }
