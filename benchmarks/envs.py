@@ -1,7 +1,8 @@
 """Environment speed: raw env steps/s, and steps/s through LAC's sampling path.
 
 Part 1, ``bench_raw``: raw steps/s per task: random actions, one process, reset on episode end
-(reset time included, as it is in training).
+(reset time included, as it is in training); navigation tasks also with Safety-Gymnasium's
+stock resets (env_config ``light_resets=False``) for comparison.
 
 Part 2, ``bench_sampling``: the same raw measurement, then steps/s of an LAC algorithm's local
 env runner (``num_env_runners=0``, one process): RLlib's vector env and episodes, the env-to-module
@@ -34,13 +35,17 @@ def bench_raw(task_ids: list[str] | None = None, steps: int = 3000, seed: int = 
     truncation) are. Each row: task, steps, episodes (completed), seconds, steps_per_s,
     mean_episode_len (completed episodes; None if none completed), cost_per_step.
     """
-    rows = [_raw_row(task_id, steps, seed) for task_id in task_ids or known_tasks()]
+    rows = []
+    for task_id in task_ids or known_tasks():
+        rows.append(_raw_row(task_id, steps, seed))
+        if task_id.startswith("Safety") and "Velocity" not in task_id:  # navigation: stock resets too
+            rows.append({**_raw_row(task_id, steps, seed, {"light_resets": False}), "task": task_id + " (stock resets)"})
     _print_table(rows)
     return rows
 
 
-def _raw_row(task_id: str, steps: int, seed: int) -> dict:
-    env = get_task(task_id).make()
+def _raw_row(task_id: str, steps: int, seed: int, env_config: dict | None = None) -> dict:
+    env = get_task(task_id).make(env_config)
     env.action_space.seed(seed)
     env.reset(seed=seed)
     actions = [env.action_space.sample() for _ in range(steps)]
@@ -150,13 +155,13 @@ def _print_sampling_table(rows: list[dict]) -> None:
 
 
 def _print_table(rows: list[dict]) -> None:
-    header = f"{'task':<30} {'steps/s':>9} {'steps':>6} {'episodes':>8} {'mean ep len':>11} {'cost/step':>9}"
+    header = f"{'task':<45} {'steps/s':>9} {'steps':>6} {'episodes':>8} {'mean ep len':>11} {'cost/step':>9}"
     print(header)
     print("-" * len(header))
     for r in rows:
         mean_len = "-" if r["mean_episode_len"] is None else f"{r['mean_episode_len']:.1f}"
         print(
-            f"{r['task']:<30} {r['steps_per_s']:>9,.0f} {r['steps']:>6} {r['episodes']:>8} "
+            f"{r['task']:<45} {r['steps_per_s']:>9,.0f} {r['steps']:>6} {r['episodes']:>8} "
             f"{mean_len:>11} {r['cost_per_step']:>9.3f}"
         )
 

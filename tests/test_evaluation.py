@@ -17,6 +17,9 @@ from lac_rllib.evaluation import (
     restore_policy,
 )
 
+# One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("evaluation")
+
 TASK = "lac/PointHazard-v0"
 
 

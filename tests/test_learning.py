@@ -13,6 +13,9 @@ import pytest
 from conftest import tiny_config
 from lac_rllib.tasks.point_hazard import PointHazardEnv
 
+# One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("learning")
+
 STEPS, TAIL = 45_000, 5  # judge the last TAIL iterations, not one noisy one
 
 

@@ -26,6 +26,9 @@ from pathlib import Path
 import pytest
 import requests
 
+# One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("cluster")
+
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "docker" / "cluster.sh"
 

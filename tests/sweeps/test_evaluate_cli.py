@@ -14,6 +14,9 @@ from sweeps import evaluate as cli
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import CHECKPOINT_TAG, SWEEP_TAG
 
+# One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("evaluate_cli")
+
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "sweeps" / "evaluate.py"
 TASK = "lac/PointHazard-v0"
