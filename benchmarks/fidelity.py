@@ -130,11 +130,18 @@ def _fmt(mean: float, std: float | None) -> str:
     return f"{mean:.2f}" if std is None or math.isnan(std) else f"{mean:.2f} ± {std:.2f}"
 
 
-def final_table(df, task: str, order: list[str]) -> tuple[str, int]:
-    """Markdown table of the final 10% at the common budget; returns (markdown, common steps)."""
-    common = int(df.groupby(["variant", "seed"])["env_steps"].max().min())
+def final_table(df, task: str, order: list[str], compare_at: int | None = None) -> tuple[str, int]:
+    """Markdown table of the final 10% at the common budget; returns (markdown, common steps).
+
+    The budget is the fewest env steps any run reached, or ``compare_at``: runs short of it are
+    left out of the table and named under it."""
+    reached = df.groupby(["variant", "seed"])["env_steps"].max()
+    common = int(compare_at or reached.min())
+    short = [f"{v} s{s_} ({int(n):,})" for (v, s_), n in reached.items() if n < common]
+    df = df[df.set_index(["variant", "seed"]).index.map(lambda k: reached[k] >= common)]
     cut = df[df["env_steps"] <= common]
-    lines = [f"Compared at {common:,} env steps (the fewest any run reached); each run's score is the mean "
+    how = "the fewest any run reached" if not compare_at else "--compare-at"
+    lines = [f"Compared at {common:,} env steps ({how}); each run's score is the mean "
              f"over its iterations in the final {TAIL:.0%} of that budget (env steps > {int(common * (1 - TAIL)):,}),"
              " then mean ± std over seeds. Return and cost are means over the episodes completed in an iteration.",
              "", "| configuration | seeds | return | cost | ν | chain end points at a bound | per-seed return / cost |",
@@ -162,6 +169,8 @@ def final_table(df, task: str, order: list[str]) -> tuple[str, int]:
     for name, (r, rs), (c, cs) in OMNISAFE.get(task, []):
         lines.append(f"| {name} | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
     lines += ["", f"Cost limit {limit:g}."]
+    if short:
+        lines += ["", f"Not yet at {common:,} steps, so not in the table: {', '.join(short)}."]
     return "\n".join(lines), common
 
 
@@ -193,14 +202,14 @@ def plot(df, task: str, order: list[str], path: Path) -> None:
     plt.close(fig)
 
 
-def report(out: Path, task: str, order: list[str], timesteps: int | None) -> str | None:
+def report(out: Path, task: str, order: list[str], timesteps: int | None, compare_at: int | None = None) -> str | None:
     df = load_curves(out)
     if df.empty:
         return None
     order = [*order, *sorted(set(df["variant"]) - set(order))]  # runs of other invocations too
     df.to_csv(out / "curves.csv", index=False)
     plot(df, task, order, out / "curves.png")
-    table, common = final_table(df, task, order)
+    table, common = final_table(df, task, order, compare_at)
     commands = sorted(p.read_text().strip() for p in out.glob("runs/*/seed*/command.txt"))
     reached = df.groupby(["variant", "seed"]).agg(steps=("env_steps", "max"), hours=("time_s", "max"))
     budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
@@ -228,6 +237,9 @@ def main(argv=None) -> int:
                         help="iterations between a run's checkpoints (what --resume continues from)")
     parser.add_argument("--report-every", type=float, default=120.0, help="seconds between report rebuilds")
     parser.add_argument("--report-only", action="store_true", help="rebuild the report from runs on disk")
+    parser.add_argument("--compare-at", type=int, default=None, metavar="STEPS",
+                        help="score runs at this many env steps (default: the fewest any run reached); "
+                             "runs short of it are listed, not scored")
     parser.add_argument("--resume", action="store_true",
                         help="continue runs from their latest checkpoint (lac-train --resume); "
                              "runs at the budget are skipped")
@@ -250,7 +262,7 @@ def main(argv=None) -> int:
     order = [v for v, _ in variants]
     out.mkdir(parents=True, exist_ok=True)
     if args.report_only:
-        print(report(out, args.task, order, None) or "no runs on disk")
+        print(report(out, args.task, order, None, args.compare_at) or "no runs on disk")
         return 0
     queue = [(v, pairs, s) for s in seeds for v, pairs in variants]  # seed-major: every variant gets seed 0 first
     if args.resume:
