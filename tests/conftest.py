@@ -17,6 +17,17 @@ def ray_session():
     ray.shutdown()
 
 
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """Thousands of tiny ops: intra-op threads only add sync overhead (10x on a busy 2-core box)."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def tiny_config(task="lac/PointHazard-v0", seed=0, **overrides):
     """A LACConfig on a built-in task, sized for tests (lr decay over 10k steps unless given)."""
     from lac_rllib.config import LACConfig

@@ -15,12 +15,7 @@ from lac_rllib.networks import CriticEnsemble, GaussianActor
 ETA = 1e-4
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _case(obs_dim=9, act_dim=3, batch=64, hidden=(64, 64, 64), activation="mish", seed=0, steps=30):

@@ -15,13 +15,7 @@ D64 = torch.float64
 M_STRONG, L_SMOOTH = 1.0, 4.0  # m I ⪯ ∇²E ⪯ l I
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """Thousands of tiny ops: intra-op threads only add sync overhead (10x on a busy 2-core box)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _quadratic(d: int, seed: int):
