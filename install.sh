@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs lac-rllib into ./.venv (Python 3.11). The order matters (../shared/NOTES.md):
+# Installs lac-rllib into ./.venv (Python 3.11). The order matters (docs/dependencies.md, "Install order"):
 #   1. torch==2.13.0 alone first: the CPU wheel; any looser spec pulls GBs of CUDA packages.
 #   2. the package and its pins (ray[tune,rllib]==2.60.0, gymnasium[mujoco]==1.2.2, mujoco, ...).
 #   3. safety-gymnasium==1.0.0 with --no-deps: its wheel pins gymnasium 0.28 / mujoco 2.3;

@@ -18,7 +18,7 @@ report (in ``--out``):
   env steps, one colour per variant, one line style per seed;
 - ``curves.csv``: every iteration of every run;
 - ``table.md``: per variant, the mean over the final 10% of each run's env steps, then mean ± std
-  over seeds, beside the paper's number for the task (SPEC §7, docs/fidelity/README.md) and,
+  over seeds, beside the paper's number for the task (docs/spec.md §7, docs/fidelity/README.md) and,
   for Safety-Gymnasium PointGoal1, OmniSafe's published SACLag/PPOLag. Runs are compared at
   equal budget: every curve is cut at the smallest env-step count all runs reached.
 """
@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout
 
 # Published figures: reward / cost (mean ± std), with the budget they were reached at.
-PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (SPEC §7)
+PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)
     "SafetyPointGoal1-v0": ((14.20, 3.35), (22.21, 3.03)),
     "SafetyCarGoal1-v0": ((24.01, 2.21), (22.15, 4.71)),
     "SafetyPointButton1-v0": ((2.45, 1.36), (21.11, 6.74)),

@@ -6,7 +6,7 @@ One ``training_step`` = one iteration k of Algorithm 2:
   2. store them in an ``EpisodeReplayBuffer`` (it keeps infos, hence the per-step cost);
   3. ν update (eq. 14) from the episodes completed in this batch, inside the Learner, before
   4. one pass of minibatches over the whole buffer in a single ``learner_group.update`` call
-     (NOTES.md: each call costs ~0.1 s, so not one call per minibatch).
+     (docs/dependencies.md, "Cost of an update call": each call costs ~0.1 s, so not one call per minibatch).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""LACConfig: every field of ``../shared/SPEC.md`` declared once, with its default and source.
+"""LACConfig: every field of ``docs/spec.md`` declared once, with its default and source.
 
 Fields live in the :class:`LACParams` dataclass below, one docstring each; ``LACConfig`` copies
 them onto itself, so ``config.langevin_steps`` works like any RLlib field and
@@ -27,9 +27,9 @@ LR_SCHEDULES = ("linear", "constant")
 
 @dataclasses.dataclass
 class LACParams:
-    """The LAC hyperparameters (SPEC §1-5). Defaults are the MuJoCo column of SPEC §5."""
+    """The LAC hyperparameters (docs/spec.md §1-5). Defaults are the MuJoCo column of docs/spec.md §5."""
 
-    # --- Langevin chain (SPEC §1, Algorithm 1) ---
+    # --- Langevin chain (docs/spec.md §1, Algorithm 1) ---
     langevin_steps: int = 30
     """T, Langevin steps per chain [P Tables 4-5]. Integer ≥ 1."""
     langevin_step_size: float = 1e-4
@@ -45,7 +45,7 @@ class LACParams:
     langevin_grad_clip: float | None = 1000.0
     """Clip of ∇_a E at every chain step [C: 1000]; None = off. In the paper's regime (λ = 1e-3)
     it is active from the first iteration and sets how far the chain moves; off, a review
-    measured 66-98% of chain end points pinned at the action bound (SPEC §1)."""
+    measured 66-98% of chain end points pinned at the action bound (docs/spec.md §1)."""
     langevin_grad_clip_mode: str = "batch"
     """"batch": one L2 norm over the whole minibatch's ∇_a E (B × A) [C]; "per_sample": each
     sample's gradient clipped to langevin_grad_clip/√B, the same step when gradients are alike
@@ -61,7 +61,7 @@ class LACParams:
     on AVX2-only CPUs it is far slower. Its end points differ from float32's by far less than the
     chain's own noise (tests/test_fused_energy.py)."""
 
-    # --- critics (SPEC §2, eqs. 12-13) ---
+    # --- critics (docs/spec.md §2, eqs. 12-13) ---
     cost_gamma: float = 0.99
     """γ_C, cost discount in the cost critic's target [C; D: γ_C = 1 leaves Q_C unbounded]."""
     reward_scale: float = 10.0
@@ -73,7 +73,7 @@ class LACParams:
     critic_hidden: tuple = (256, 256, 256)
     """Hidden layers of each critic (obs+act → Mish MLP → Q) [C]."""
 
-    # --- actor (SPEC §3, eqs. 15-16) ---
+    # --- actor (docs/spec.md §3, eqs. 15-16) ---
     beta: float = 0.0
     """β, weight of KL(π_φ ‖ π_φ') in the actor loss eq. (16) [C: 0; P Table 3 "PR"]. ≥ 0."""
     actor_chain_at: str = "next"
@@ -95,7 +95,7 @@ class LACParams:
     """The actor's mean-head weights are multiplied by this at init and its bias zeroed [C], so
     the first policy acts near 0; None keeps nn.Linear's init of the head."""
 
-    # --- Lagrange multiplier (SPEC §4, eq. 14) ---
+    # --- Lagrange multiplier (docs/spec.md §4, eq. 14) ---
     nu_init: float = 0.0
     """ν₀ [P, C]. ≥ 0."""
     nu_lr: float = 0.01
@@ -103,9 +103,9 @@ class LACParams:
     nu_max_adaptive: bool = True
     """Upper bound on ν [C]: 2 in the first iteration, then 2·|mean y_R| / |mean y_C| over the
     latest iteration's minibatches, so the cost term cannot take over the chain while the reward
-    critic is small (SPEC §4). False: ν unbounded, as [P] writes eq. (14)."""
+    critic is small (docs/spec.md §4). False: ν unbounded, as [P] writes eq. (14)."""
 
-    # --- data and schedule (SPEC §5) ---
+    # --- data and schedule (docs/spec.md §5) ---
     env_steps_per_iteration: int = 5000
     """Env steps sampled per iteration ("batch size" in Tables 4-5) [P]."""
     replay_capacity: int = 50_000
@@ -154,9 +154,9 @@ class LACParams:
 
     # --- task ---
     cost_limit: float | None = None
-    """b; None = the task's limit (SPEC §6)."""
+    """b; None = the task's limit (docs/spec.md §6)."""
     episode_cost_discount: float | None = None
-    """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (SPEC §6)."""
+    """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
 
 
 
@@ -262,7 +262,7 @@ class LACConfig(AlgorithmConfig):
     """Config for :class:`lac_rllib.algorithm.LAC`. See :class:`LACParams` for the fields.
 
     ``LACConfig().task("SafetyPointGoal1-v0")`` sets the env, its cost convention and the
-    task's preset (SPEC Table 4 or 5); explicit ``training(...)`` values win over presets.
+    task's preset (docs/spec.md §5, Tables 4-5); explicit ``training(...)`` values win over presets.
     """
 
     def __init__(self, algo_class=None):

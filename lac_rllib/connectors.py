@@ -34,7 +34,7 @@ class AddCostsFromInfos(ConnectorV2):
     """Adds the ``costs`` column: the cost of each transition (s, a, r, c, s').
 
     It must sit right after ``AddNextObservationsFromEpisodesToTrainBatch`` in the learner
-    pipeline (see NOTES.md: placed earlier, rows come out misaligned). Infos index like
+    pipeline (see docs/dependencies.md, "The cost column": placed earlier, rows come out misaligned). Infos index like
     observations (index 0 is the reset info), so the cost of step t is ``infos[t + 1]``.
     """
 
@@ -55,7 +55,7 @@ class ShuffleRows(ConnectorV2):
     """Permutes the rows of the batched train batch (one permutation for all columns).
 
     Learner.update only shuffles between epochs; LAC makes exactly one pass over the buffer
-    per iteration (SPEC §5), so without this the minibatches would be consecutive steps.
+    per iteration (docs/spec.md §5), so without this the minibatches would be consecutive steps.
     """
 
     def __init__(self, *args, seed: int | None = None, **kwargs):

@@ -10,7 +10,7 @@ this process, without ``ray.init``:
   Langevin chain needs the critics, the target actor and ν;
 * the env-to-module connector pipeline the env runner acted with, via
   ``EnvToModulePipeline.from_checkpoint(env_runner/env_to_module_connector)``; its
-  ``MeanStdFilter`` (running mean/std + clip, SPEC §5) is swapped for a frozen twin
+  ``MeanStdFilter`` (running mean/std + clip, docs/spec.md §5) is swapped for a frozen twin
   (``update_stats=False``) holding the same state, so evaluation never moves the statistics;
 * the task id and the LAC config fields from the checkpoint's ``rllib_checkpoint.json``,
   which ``LAC.get_metadata`` fills (``checkpoint_format`` 1). The lac-rllib major.minor
@@ -20,7 +20,7 @@ this process, without ``ray.init``:
 reset with seed ``seed + i``, fully deterministic for equal seeds:
 
 * ``actions="generator"``: the actor's mean μ_φ(s) (what RLlib's inference acts with);
-* ``actions="langevin"``: Algorithm 1 (SPEC §1) at each visited state, started from the TARGET
+* ``actions="langevin"``: Algorithm 1 (docs/spec.md §1) at each visited state, started from the TARGET
   actor π_φ'(·|s), with the online critics and the checkpoint's ν, noise from a
   ``torch.Generator`` seeded with ``seed + i``; it also reports the mean energy of the chain's
   start ã₀ ~ π_φ' (the generator's proposal) against the refined action ã_T.

@@ -1,4 +1,4 @@
-"""The Langevin policy: Algorithm 1 of the paper, in the efficient form of SPEC §1.
+"""The Langevin policy: Algorithm 1 of the paper, in the efficient form of docs/spec.md §1.
 
 Algorithm 1 / eq. (9): for i = 1..T,
 

@@ -3,7 +3,7 @@
 One ``learner_group.update`` call makes a whole pass of minibatches over the replay buffer
 (Algorithm 2, lines 6-14); per minibatch: critic step, actor step, Polyak step of all targets
 (from the first actor update on [C]). Around the pass: ν's projected step under its bound before
-it (eq. 14, SPEC §4), the learning-rate schedules and the next bound after it.
+it (eq. 14, docs/spec.md §4), the learning-rate schedules and the next bound after it.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ TS_EPISODE_COST, TS_ITERATION = "lac_episode_cost", "lac_training_iteration"
 def critic_targets(batch, q_next: torch.Tensor, n_reward: int, config) -> tuple[torch.Tensor, torch.Tensor]:
     """eq. (13) with clipped double-Q: y_R uses the min over the reward targets, y_C the max
     over the cost targets. ``terminated`` cuts the bootstrap; time-limit truncation does not
-    (SPEC §2 [D]) unless ``bootstrap_on_truncation`` is off, which reproduces [C]."""
+    (docs/spec.md §2 [D]) unless ``bootstrap_on_truncation`` is off, which reproduces [C]."""
     done = batch[Columns.TERMINATEDS].float()
     if not config.bootstrap_on_truncation:
         done = torch.maximum(done, batch[Columns.TRUNCATEDS].float())
@@ -61,7 +61,7 @@ class LACTorchLearner(TorchLearner):
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None
         )
-        # s' for the critic targets, then the cost of each row (NOTES.md: this order).
+        # s' for the critic targets, then the cost of each row (docs/dependencies.md, "The cost column": this order).
         self._learner_connector.insert_after(
             AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch()
         )
@@ -101,7 +101,7 @@ class LACTorchLearner(TorchLearner):
         if self._y_sums[2] == 0:
             return
         # The iteration's mean targets (every minibatch, not the last one) and, from them, [C]'s
-        # ν bound for the next iteration: ν_max = 2·|mean y_R| / |mean y_C| (SPEC §4).
+        # ν bound for the next iteration: ν_max = 2·|mean y_R| / |mean y_C| (docs/spec.md §4).
         mean_r, mean_c = (self._y_sums[:2] / self._y_sums[2]).tolist()
         self._nu_max = 2.0 * abs(mean_r) / max(abs(mean_c), 1e-8)
         for mid in self.module._rl_modules:

@@ -1,8 +1,8 @@
 """LACTorchRLModule: the networks of LAC and their forward passes (losses live in the Learner).
 
-- ``actor``: the Gaussian generator π_φ (SPEC §3). Inference acts with its mean, exploration
+- ``actor``: the Gaussian generator π_φ (docs/spec.md §3). Inference acts with its mean, exploration
   samples it (RLlib's TorchDiagGaussian over [mean, log_std]).
-- ``critics``: 2 reward + 2 cost critics as one batched ensemble (SPEC §2).
+- ``critics``: 2 reward + 2 cost critics as one batched ensemble (docs/spec.md §2).
 - ``target_actor`` / ``target_critics``: Polyak copies π_φ', Q' (Algorithm 2, lines 11-13).
 - ``nu``: the Lagrange multiplier ν (eq. 14). It is a buffer of the module, so it travels with
   the weights (the Learner's state, checkpoints) and a restored module can run the chain at

@@ -1,6 +1,6 @@
-"""Plain-torch networks for LAC (SPEC §3): the Gaussian generator actor and the critic ensemble.
+"""Plain-torch networks for LAC (docs/spec.md §3): the Gaussian generator actor and the critic ensemble.
 
-The critic ensemble exists for the Langevin chain (SPEC §1): the chain needs ∇_a of up to four
+The critic ensemble exists for the Langevin chain (docs/spec.md §1): the chain needs ∇_a of up to four
 critics at every one of its T steps, so the critics are stored as one batched ensemble (one
 ``baddbmm`` per layer for all members), the state part of the first layer is computed once per
 chain, and the action gradient comes from a hand-written backward pass that builds no autograd

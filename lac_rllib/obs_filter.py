@@ -1,4 +1,4 @@
-"""The observation filter of SPEC §5: RLlib's running mean/std filter with the std floored.
+"""The observation filter of docs/spec.md §5: RLlib's running mean/std filter with the std floored.
 
 [C] normalises with (s − mean) / max(std, 1e-2), clipped to ±5. RLlib's ``MeanStdFilter``
 divides by std + 1e-8, so an observation dimension that barely varies (a lidar bin that is

@@ -1,4 +1,4 @@
-"""LACConfig: SPEC defaults, presets, and clear early errors for bad values."""
+"""LACConfig: the defaults of docs/spec.md, presets, and clear early errors for bad values."""
 
 import subprocess
 import sys
@@ -43,7 +43,7 @@ def test_spec_defaults_and_presets():
     assert (c.langevin_steps, c.langevin_step_size, c.temperature, c.beta) == (30, 1e-4, 1e-3, 0.0)
     assert (c.nu_lr, c.nu_init, c.polyak_tau, c.reward_scale, c.cost_gamma, c.gamma) == (0.01, 0.0, 0.005, 10.0, 0.99, 0.99)
     assert (c.replay_capacity, c.lac_minibatch_size, c.random_iterations) == (50_000, 256, 5)
-    # The authors' training dynamics (SPEC "Rule for defaults"): chain clip, ν bound, lr decay,
+    # The authors' training dynamics (docs/spec.md, "Rule for defaults"): chain clip, ν bound, lr decay,
     # head init, std floor, Polyak from the first actor update.
     assert (c.langevin_grad_clip, c.langevin_grad_clip_mode, c.nu_max_adaptive) == (1000.0, "batch", True)
     assert (c.lr_schedule, c.lr_final_fraction, c.actor_mean_init_scale) == ("linear", 0.5, 0.1)

@@ -78,7 +78,7 @@ def test_restore_gives_full_module_and_frozen_filter(policy, checkpoint):
     assert policy.obs_filter.get_state()[None]["running_stats"] == saved_filter[None]["running_stats"]
     assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["update_stats"] is False
     assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["clip_by_value"] == 5.0
-    assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["std_floor"] == 1e-2  # SPEC §5, kept frozen
+    assert policy.obs_filter.get_ctor_args_and_kwargs()[1]["std_floor"] == 1e-2  # docs/spec.md §5, kept frozen
 
 
 def test_restore_accepts_the_train_output_dir(checkpoint):
@@ -90,7 +90,7 @@ def test_preprocess_normalises_and_clips(policy):
 
     stats = RunningStat.from_state(policy.obs_filter.get_state()[None]["running_stats"][0])
     raw = np.array([[-1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 0.65], [50.0, 0, 0, 0, 0, 0, 0]], dtype=np.float32)
-    expected = np.clip((raw - stats.mean) / np.maximum(stats.std, 1e-2), -5, 5)  # std floored (SPEC §5)
+    expected = np.clip((raw - stats.mean) / np.maximum(stats.std, 1e-2), -5, 5)  # std floored (docs/spec.md §5)
     np.testing.assert_allclose(policy.preprocess(raw).numpy(), expected, rtol=1e-4, atol=1e-4)
     assert policy.preprocess(raw).numpy()[1, 0] == 5.0  # clipped
 

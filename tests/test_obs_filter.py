@@ -1,4 +1,4 @@
-"""The observation filter (SPEC §5): RLlib's running mean/std with the std floored before dividing."""
+"""The observation filter (docs/spec.md §5): RLlib's running mean/std with the std floored before dividing."""
 
 import gymnasium as gym
 import numpy as np

@@ -1,4 +1,4 @@
-"""FOCOPS-convention MuJoCo tasks (SPEC §6, rows marked [F]) on gymnasium's MuJoCo envs.
+"""FOCOPS-convention MuJoCo tasks (docs/spec.md §6, rows marked [F]) on gymnasium's MuJoCo envs.
 
 Ids, sizes, limits (episode cost Ĵ_C = Σ_t 0.99^t c_t, i.e. ``episode_cost_discount=0.99``;
 1000-step episodes; LAC preset ``"mujoco"``):

@@ -2,7 +2,7 @@
 
 A task bundles what LAC needs to know beyond the gymnasium id: where the per-step cost
 comes from, how episode costs are aggregated for the Lagrange update (eq. 14), the cost
-limit b, the LAC preset (SPEC Table 4 or 5) and the observation/action sizes.
+limit b, the LAC preset (docs/spec.md §5, Tables 4-5) and the observation/action sizes.
 
 Every env we build returns the cost of a step in ``info["cost"]`` (wrappers make it so),
 because that is the one place RLlib's env runners carry per-step side data into episodes.
@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import gymnasium as gym
 
-#: Preset names understood by ``LACConfig.preset`` (SPEC §5 columns).
+#: Preset names understood by ``LACConfig.preset`` (docs/spec.md §5 columns).
 MUJOCO, SAFETY_GYM, TINY = "mujoco", "safety_gym", "tiny"
 
 

@@ -1,4 +1,4 @@
-"""Safety-Gymnasium tasks (SPEC §6): navigation (Point/Car × Goal1/Button1) and velocity v1.
+"""Safety-Gymnasium tasks (docs/spec.md §6): navigation (Point/Car × Goal1/Button1) and velocity v1.
 
 Every env built here is safety_gymnasium's own env (6-tuple ``step``) made through
 ``safety_gymnasium``'s ``make`` with the spec safety_gymnasium registered (so its usual wrappers

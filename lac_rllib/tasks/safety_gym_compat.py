@@ -7,7 +7,7 @@ edited: :func:`apply` fixes everything from here, once per process, and every en
 ours calls it before touching ``safety_gymnasium`` (RLlib env runners import the factory by
 string, so every process that builds an env gets the fixes).
 
-What :func:`apply` patches, and how narrowly (NOTES.md, "Safety-Gymnasium", items 1-4):
+What :func:`apply` patches, and how narrowly (docs/dependencies.md, "Compatibility fixes", items 1-4):
 
 1. **Renamed gymnasium wrapper modules** (``ModuleNotFoundError`` at import).
    ``safety_gymnasium`` imports ``gymnasium.wrappers.compatibility`` (``EnvCompatibility``),

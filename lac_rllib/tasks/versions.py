@@ -1,7 +1,7 @@
 """Versions of the simulation stack, for run metadata.
 
-numpy and mujoco versions change trajectories (NOTES.md): record them with every run.
-Read from package metadata, so nothing heavy is imported.
+numpy and mujoco versions change trajectories, so every run records them (docs/dependencies.md,
+"Versions that change results"). Read from package metadata, so nothing heavy is imported.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""safety_gym_compat: apply() is idempotent, fixes what NOTES.md lists and changes nothing else."""
+"""safety_gym_compat: apply() is idempotent, fixes what docs/dependencies.md lists and changes nothing else."""
 
 import dataclasses
 import json

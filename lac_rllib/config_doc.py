@@ -1,0 +1,91 @@
+"""docs/config.md, generated from ``lac_rllib/config.py`` so it cannot drift from the code.
+
+Regenerate with ``python -m lac_rllib.config_doc > docs/config.md`` (tests/test_docs.py checks it).
+Fields are grouped by the ``# --- group ---`` comments of :class:`LACParams`, in source order.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+import re
+import sys
+
+from lac_rllib.config import PRESETS, LACParams, field_docs
+from lac_rllib.tasks import get_task, known_tasks
+
+REGENERATE = "python -m lac_rllib.config_doc > docs/config.md"
+_GROUP = re.compile(r"^\s*# --- (.+?) ---\s*$")
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def _code(value) -> str:
+    return f"`{_cell(repr(value))}`"
+
+
+def field_groups() -> list[tuple[str, list[str]]]:
+    """[(group title, [field names])] in the order :class:`LACParams` declares them."""
+    source = inspect.getsource(LACParams)
+    # Line numbers (1-based, within ``source``) of the group comments, and each field's group.
+    titles = {i: m.group(1) for i, line in enumerate(source.splitlines(), 1) if (m := _GROUP.match(line))}
+    groups: list[tuple[str, list[str]]] = []
+    for node in ast.parse(source).body[0].body:
+        if not isinstance(node, ast.AnnAssign):
+            continue
+        above = [i for i in titles if i < node.lineno]
+        title = titles[max(above)] if above else "Fields"
+        if not groups or groups[-1][0] != title:
+            groups.append((title, []))
+        groups[-1][1].append(node.target.id)
+    return groups
+
+
+def config_markdown() -> str:
+    """The text of docs/config.md."""
+    docs = field_docs()
+    defaults = {f.name: f.default for f in dataclasses.fields(LACParams)}
+    out = [
+        "# LAC configuration fields",
+        "",
+        f"*Generated from `lac_rllib/config.py`: do not edit; regenerate with `{REGENERATE}`.*",
+        "",
+        "Every field of `LACParams`, with its default and its docstring. Set a field with",
+        "`LACConfig().training(name=value)`, `lac-train --set name=value` or the sweep's `--set name=value`.",
+        "Source tags: [P] paper, [C] authors' code, [F] FOCOPS, [D] our decision; the formulas and the",
+        "reasons are in [spec.md](spec.md).",
+    ]
+    for title, names in field_groups():
+        out += ["", f"## {title[:1].upper()}{title[1:]}", "", "| field | default | meaning |", "|---|---|---|"]
+        out += [f"| `{n}` | {_code(defaults[n])} | {_cell(docs.get(n, ''))} |" for n in names]
+
+    touched = [n for n in defaults if any(n in p for p in PRESETS.values())]
+    out += [
+        "", "## Presets", "",
+        "`LACConfig().task(id)` applies the task's preset (`PRESETS` in `lac_rllib/config.py`), then the",
+        "task's own overrides (next table); explicit `training(...)` values win over both. An empty cell",
+        "keeps the default.",
+        "",
+        "| field | default | " + " | ".join(f"`{p}`" for p in PRESETS) + " |",
+        "|---|---|" + "---|" * len(PRESETS),
+    ]
+    for n in touched:
+        cells = [_code(p[n]) if n in p else "" for p in PRESETS.values()]
+        out.append(f"| `{n}` | {_code(defaults[n])} | " + " | ".join(cells) + " |")
+
+    out += ["", "## Tasks", "",
+            "The registered tasks (`lac_rllib/tasks/`; spec.md §6): the preset each applies, its own overrides,",
+            "the cost limit b and the discount of its episode cost Ĵ_C (1 = a plain sum).",
+            "", "| task | preset | overrides | cost limit | episode cost discount |", "|---|---|---|---|---|"]
+    for task_id in known_tasks():
+        t = get_task(task_id)
+        overrides = ", ".join(f"`{k}={v!r}`" for k, v in t.overrides.items())
+        out.append(f"| `{t.id}` | `{t.preset}` | {overrides} | {t.cost_limit:g} | {t.episode_cost_discount:g} |")
+    return "\n".join(out) + "\n"
+
+
+if __name__ == "__main__":
+    sys.stdout.write(config_markdown())

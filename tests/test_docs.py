@@ -1,0 +1,114 @@
+"""The documents the code cites are in the repository and say what the code does (fast, no Ray).
+
+- docs/config.md is generated from ``LACParams`` and ``PRESETS``, so it cannot drift;
+- every ``docs/spec.md §N`` citation names a section that exists, and every
+  ``docs/spec.md, "Name"`` / ``docs/dependencies.md, "Name"`` citation a heading that exists;
+- nothing points outside the repository any more (the specification and the dependency notes
+  used to live in a sibling folder).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import re
+from pathlib import Path
+
+import pytest
+
+from lac_rllib.config import LACParams
+from lac_rllib.config_doc import REGENERATE, config_markdown
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+CODE_DIRS = ("lac_rllib", "sweeps", "benchmarks", "tests")
+# Files outside CODE_DIRS that cite the docs (docs/fidelity/ is evidence and is left as it was).
+OTHER_FILES = ("README.md", "install.sh", "pyproject.toml", "docker/Dockerfile", "docker/README.md",
+               "docs/speed.md", "docs/speed/iteration.md", "docs/config.md")
+
+# "SPEC §1", "docs/spec.md §5", "docs/spec.md §1-5": one section or a range.
+SECTION_CITE = re.compile(r"(?:\bSPEC|docs/spec\.md),? §(\d+)(?:\s*[-–]\s*(\d+))?")
+# 'docs/dependencies.md, "Safety-Gymnasium"': a heading of that document.
+NAMED_CITE = re.compile(r'docs/(spec|dependencies)\.md,?\s+"([^"]+)"')
+# Pointers to the old out-of-repo files, and bare "SPEC" citations (word-bounded, so names such
+# as SPECS or _SAFETY_SPECS are fine).
+OUTSIDE = ("NOTES.md", "SPEC.md", "../shared")
+BARE_SPEC = re.compile(r"\bSPEC\b")
+
+
+def code_files() -> list[Path]:
+    files = [p for d in CODE_DIRS for p in sorted((ROOT / d).rglob("*.py")) if "__pycache__" not in p.parts]
+    return [p for p in files if p != Path(__file__).resolve()]
+
+
+def cited_files() -> list[Path]:
+    return code_files() + [ROOT / f for f in OTHER_FILES if (ROOT / f).exists()]
+
+
+def rel(path: Path) -> str:
+    return str(path.relative_to(ROOT))
+
+
+def headings(doc: str) -> set[str]:
+    text = (DOCS / f"{doc}.md").read_text(encoding="utf-8")
+    return {m.group(1).strip() for m in re.finditer(r"^#+ (.+)$", text, re.MULTILINE)}
+
+
+def spec_sections() -> set[int]:
+    return {int(m.group(1)) for h in headings("spec") if (m := re.match(r"(\d+)\. ", h))}
+
+
+def test_config_md_is_generated_from_the_code():
+    path = DOCS / "config.md"
+    assert path.exists(), f"docs/config.md is missing; generate it with: {REGENERATE}"
+    text, expected = path.read_text(encoding="utf-8"), config_markdown()
+    if text != expected:
+        diff = "\n".join(list(difflib.unified_diff(text.splitlines(), expected.splitlines(), "docs/config.md",
+                                                   "config_markdown()", lineterm=""))[:30])
+        pytest.fail(f"docs/config.md is out of date with lac_rllib/config.py; regenerate it with: {REGENERATE}\n{diff}")
+
+
+@pytest.mark.parametrize("field", dataclasses.fields(LACParams), ids=lambda f: f.name)
+def test_every_field_is_documented_with_its_default(field):
+    text = (DOCS / "config.md").read_text(encoding="utf-8")
+    row = f"| `{field.name}` | `{repr(field.default).replace('|', chr(92) + '|')}` |"
+    assert row in text, f"docs/config.md has no row {row!r}; regenerate it with: {REGENERATE}"
+
+
+def test_spec_has_the_numbered_sections():
+    assert spec_sections() == set(range(1, 8)), sorted(spec_sections())
+    assert {"Notation", "Rule for defaults", "Sources"} <= headings("spec")
+
+
+def test_section_citations_point_at_existing_sections():
+    sections, bad, count = spec_sections(), [], 0
+    for path in cited_files():
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            for m in SECTION_CITE.finditer(line):
+                count += 1
+                first, last = int(m.group(1)), int(m.group(2) or m.group(1))
+                if first > last or not set(range(first, last + 1)) <= sections:
+                    bad.append(f"{rel(path)}:{n}: {m.group(0)}")
+    assert count > 0, "no docs/spec.md §N citation found: is the pattern still right?"
+    assert not bad, "citations of sections docs/spec.md does not have:\n" + "\n".join(bad)
+
+
+def test_named_citations_point_at_existing_headings():
+    known = {doc: headings(doc) for doc in ("spec", "dependencies")}
+    bad = []
+    for path in cited_files():
+        text = path.read_text(encoding="utf-8")
+        for m in NAMED_CITE.finditer(text):  # the whole text: a citation may wrap after the comma
+            if m.group(2) not in known[m.group(1)]:
+                bad.append(f"{rel(path)}:{text.count(chr(10), 0, m.start()) + 1}: {' '.join(m.group(0).split())}")
+    assert not bad, "citations of headings the document does not have:\n" + "\n".join(bad)
+
+
+def test_nothing_points_outside_the_repository():
+    bad = []
+    for path in cited_files():
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if any(s in line for s in OUTSIDE) or BARE_SPEC.search(line):
+                bad.append(f"{rel(path)}:{n}: {line.strip()}")
+    assert not bad, ("cite docs/spec.md §N or docs/dependencies.md (the specification and the dependency "
+                     "notes live in docs/):\n" + "\n".join(bad))
