@@ -39,7 +39,8 @@ def bench_raw(task_ids: list[str] | None = None, steps: int = 3000, seed: int = 
     for task_id in task_ids or known_tasks():
         rows.append(_raw_row(task_id, steps, seed))
         if task_id.startswith("Safety") and "Velocity" not in task_id:  # navigation: stock resets too
-            rows.append({**_raw_row(task_id, steps, seed, {"light_resets": False}), "task": task_id + " (stock resets)"})
+            stock = _raw_row(task_id, steps, seed, {"light_resets": False})
+            rows.append({**stock, "task": task_id + " (stock resets)"})
     _print_table(rows)
     return rows
 

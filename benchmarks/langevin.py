@@ -32,7 +32,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 from lac_rllib.langevin import langevin_chain, naive_langevin_chain  # noqa: E402
-from lac_rllib.networks import CriticEnsemble, GaussianActor  # noqa: E402
+from lac_rllib.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows  # noqa: E402
 
 TASK_DIMS = {"PointGoal1": (60, 2), "Humanoid": (376, 17)}
 CHAIN = dict(steps=30, step_size=1e-4, temperature=1e-3, nu=0.5)
@@ -113,7 +113,8 @@ def _authors_chain(critics, actor, obs, a0, noise, low, high):
         mean, log_std = actor(obs)
         q = critics(obs, a)
         logp = torch.distributions.Normal(mean, log_std.exp()).log_prob(a).sum(-1)
-        energy = (CHAIN["nu"] * q[nr:].max(0).values - q[:nr].min(0).values) / CHAIN["temperature"] - logp
+        q_r, q_c = reward_rows(q, nr), cost_rows(q, nr)
+        energy = (CHAIN["nu"] * q_c.max(0).values - q_r.min(0).values) / CHAIN["temperature"] - logp
         energy.sum().backward()
         with torch.no_grad():
             a = (a - 0.5 * CHAIN["step_size"] * a.grad + CHAIN["step_size"] ** 0.5 * z).clamp(low, high)
@@ -160,11 +161,11 @@ def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
     from ray.rllib.core.columns import Columns
     from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 
+    from lac_rllib import module as M
     from lac_rllib.config import LACConfig
     from lac_rllib.connectors import COSTS
     from lac_rllib.learner import critic_targets
     from lac_rllib.networks import gaussian_kl, gaussian_log_prob
-    from lac_rllib import module as M
 
     obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
     act_space = gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32)
@@ -192,11 +193,13 @@ def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
         for i in range(k):
             b = {c: v[256 * i: 256 * (i + 1)] for c, v in tensors.items()}
             out = module._forward_train(b)
-            y_r, y_c = critic_targets(b, out[M.Q_TARGET_NEXT], 2, config)
-            q = out[M.Q_PRED]
-            critic_loss = ((q[:2] - y_r) ** 2).mean(-1).sum() + ((q[2:] - y_c) ** 2).mean(-1).sum()
-            actor_loss = -gaussian_log_prob(out[M.ACTOR_TARGET_ACTION], out[M.ACTOR_MEAN], out[M.ACTOR_LOG_STD]).mean() \
-                + config.beta * gaussian_kl(out[M.ACTOR_MEAN], out[M.ACTOR_LOG_STD], out[M.TARGET_MEAN], out[M.TARGET_LOG_STD]).mean()
+            n_r = module.critics.n_reward
+            y_r, y_c = critic_targets(b, out[M.Q_TARGET_NEXT], n_r, config)
+            q_r, q_c = reward_rows(out[M.Q_PRED], n_r), cost_rows(out[M.Q_PRED], n_r)
+            critic_loss = ((q_r - y_r) ** 2).mean(-1).sum() + ((q_c - y_c) ** 2).mean(-1).sum()
+            logp = gaussian_log_prob(out[M.ACTOR_TARGET_ACTION], out[M.ACTOR_MEAN], out[M.ACTOR_LOG_STD])
+            kl = gaussian_kl(out[M.ACTOR_MEAN], out[M.ACTOR_LOG_STD], out[M.TARGET_MEAN], out[M.TARGET_LOG_STD])
+            actor_loss = -logp.mean() + config.beta * kl.mean()
             critic_opt.zero_grad(), actor_opt.zero_grad()
             (critic_loss + actor_loss).backward()
             torch.nn.utils.clip_grad_norm_(module.actor.parameters(), config.actor_grad_clip)

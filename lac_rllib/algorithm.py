@@ -18,6 +18,7 @@ import numpy as np
 from ray.rllib.algorithms.algorithm import Algorithm
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.execution.rollout_ops import synchronous_parallel_sample
+from ray.rllib.utils.annotations import override
 from ray.rllib.utils.metrics import (
     ENV_RUNNER_RESULTS,
     LEARNER_RESULTS,
@@ -52,9 +53,11 @@ def register_task_env(task_id: str) -> None:
 
 class LAC(Algorithm):
     @classmethod
+    @override(Algorithm)
     def get_default_config(cls) -> LACConfig:
         return LACConfig(cls)
 
+    @override(Algorithm)
     def get_metadata(self) -> dict:
         """RLlib writes this into the checkpoint's ``rllib_checkpoint.json``; the evaluation
         CLI (lac_rllib.evaluation) checks the version/format and reads the task and config."""
@@ -74,6 +77,7 @@ class LAC(Algorithm):
         # JSON-safe (tuples -> lists, anything exotic -> str).
         return {**super().get_metadata(), **json.loads(json.dumps(lac, default=str))}
 
+    @override(Algorithm)
     def setup(self, config) -> None:
         if config.task_id:
             register_task_env(config.task_id)
@@ -81,17 +85,20 @@ class LAC(Algorithm):
         self.replay_buffer = EpisodeReplayBuffer(capacity=self.config.replay_capacity)
         self._last_episode_stats = (float("nan"), float("nan"))
 
+    @override(Algorithm)
     def get_state(self, components=None, *, not_components=None, **kwargs) -> dict:
         state = super().get_state(components, not_components=not_components, **kwargs)
         if self.config.store_replay_buffer and self._check_component(REPLAY_BUFFER, components, not_components):
             state[REPLAY_BUFFER] = self.replay_buffer.get_state()
         return state
 
+    @override(Algorithm)
     def set_state(self, state: dict) -> None:
         super().set_state(state)
         if REPLAY_BUFFER in state:
             self.replay_buffer.set_state(state[REPLAY_BUFFER])
 
+    @override(Algorithm)
     def training_step(self) -> None:
         cfg = self.config
         episodes, runner_results = synchronous_parallel_sample(

@@ -2,161 +2,214 @@
 
 Fields live in the :class:`LACParams` dataclass below, one docstring each; ``LACConfig`` copies
 them onto itself, so ``config.langevin_steps`` works like any RLlib field and
-``config.training(langevin_steps=50)`` sets it. Values are checked as they are set, so bad
-input fails before Ray starts. Source tags: [P] paper, [C] authors' code, [F] FOCOPS, [D] ours.
+``config.training(langevin_steps=50)`` sets it. Each field declares its accepted values next to
+its default (:class:`Accepted`); they are checked as they are set, so bad input fails before Ray
+starts, and docs/config.md and ``lac-train --help`` show them. Source tags: [P] paper, [C]
+authors' code, [F] FOCOPS, [D] ours.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Callable
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.utils.annotations import override
 
 from lac_rllib.fused_energy import DTYPES as LANGEVIN_DTYPES
+from lac_rllib.langevin import CLIP_MODES, INFORMATIVE, STARTS
+from lac_rllib.networks import ACTIVATIONS
 from lac_rllib.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
 
-START_MODES = ("informative", "noninformative")
 CHAIN_AT = ("next", "current")
-GRAD_CLIP_MODES = ("batch", "per_sample")
 LR_SCHEDULES = ("linear", "constant")
+
+
+@dataclasses.dataclass(frozen=True)
+class Accepted:
+    """The values a field accepts, declared once: ``test`` checks a value (:func:`check_field`),
+    ``text`` says it, in the error for a bad value, docs/config.md and ``lac-train --help``."""
+
+    text: str
+    test: Callable[[Any], bool]
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def one_of(choices: tuple[str, ...]) -> Accepted:
+    return Accepted(" | ".join(map(str, choices)), lambda v: isinstance(v, str) and v in choices)
+
+
+def or_none(accepted: Accepted) -> Accepted:
+    return Accepted(f"None or {accepted.text}", lambda v: v is None or accepted.test(v))
+
+
+# The accepted values several fields share.
+INT_GE_0 = Accepted("an integer >= 0", lambda v: _is_int(v) and v >= 0)
+INT_GE_1 = Accepted("an integer >= 1", lambda v: _is_int(v) and v >= 1)
+FINITE = Accepted("a finite number", _is_real)
+POSITIVE = Accepted("a finite number > 0", lambda v: _is_real(v) and v > 0)
+NON_NEGATIVE = Accepted("a finite number >= 0", lambda v: _is_real(v) and v >= 0)
+FRACTION = Accepted("a number in (0, 1]", lambda v: _is_real(v) and 0 < v <= 1)
+BOOL = Accepted("True | False", lambda v: isinstance(v, bool))
+LAYERS = Accepted("a non-empty sequence of integers >= 1",
+                  lambda v: isinstance(v, (tuple, list)) and len(v) >= 1 and all(_is_int(h) and h >= 1 for h in v))
+
+
+def param(default: Any, *, accepts: Accepted) -> Any:
+    """A field of :class:`LACParams`: its default and the values it accepts."""
+    return dataclasses.field(default=default, metadata={"accepts": accepts})
 
 
 @dataclasses.dataclass
 class LACParams:
-    """The LAC hyperparameters (docs/spec.md §1-5). Defaults are the MuJoCo column of docs/spec.md §5."""
+    """The LAC hyperparameters (docs/spec.md §1-5). Defaults are the MuJoCo column of docs/spec.md §5.
+
+    Each field: ``name: type = param(default, accepts=...)`` and, below it, its docstring.
+    """
 
     # --- Langevin chain (docs/spec.md §1, Algorithm 1) ---
-    langevin_steps: int = 30
-    """T, Langevin steps per chain [P Tables 4-5]. Integer ≥ 1."""
-    langevin_step_size: float = 1e-4
-    """η, the step size of eq. (9) [P]. > 0."""
-    temperature: float = 1e-3
-    """λ, the fixed temperature of the energy [P Tables 4-5]. > 0."""
-    langevin_start: str = "informative"
+    langevin_steps: int = param(30, accepts=INT_GE_1)
+    """T, Langevin steps per chain [P Tables 4-5]."""
+    langevin_step_size: float = param(1e-4, accepts=POSITIVE)
+    """η, the step size of eq. (9) [P]."""
+    temperature: float = param(1e-3, accepts=POSITIVE)
+    """λ, the fixed temperature of the energy [P Tables 4-5]."""
+    langevin_start: str = param(INFORMATIVE, accepts=one_of(STARTS))
     """"informative": ã₀ ~ π_φ'(·|s) (eq. 11) [P, C]; "noninformative": ã₀ ~ N(0, I) (ablation NI)."""
-    logp_weight: float = 1.0
-    """w, the weight of −log π_φ' in the energy [P; C's flag is pinned to 1 by a bug]. ≥ 0."""
-    langevin_clamp: bool = True
+    logp_weight: float = param(1.0, accepts=NON_NEGATIVE)
+    """w, the weight of −log π_φ' in the energy [P; C's flag is pinned to 1 by a bug]."""
+    langevin_clamp: bool = param(True, accepts=BOOL)
     """Clamp ã to the action bounds after every step [C]."""
-    langevin_grad_clip: float | None = 1000.0
-    """Clip of ∇_a E at every chain step [C: 1000]; None = off. In the paper's regime (λ = 1e-3)
-    it is active from the first iteration and sets how far the chain moves; off, a review
-    measured 66-98% of chain end points pinned at the action bound (docs/spec.md §1)."""
-    langevin_grad_clip_mode: str = "batch"
+    langevin_grad_clip: float | None = param(1000.0, accepts=or_none(POSITIVE))
+    """Clip of ∇_a E at every chain step [C: 1000]; None = off. Measured on SafetyPointGoal1 at the
+    paper's sizes (λ = 1e-3): it never bound up to 360k env steps (langevin_clip_fraction 0,
+    docs/fidelity/); whether it binds later in a run is open. With it and the ν bound off, a review
+    measured 66-98% of chain end points pinned at the action bound by 860k steps (docs/spec.md §1)."""
+    langevin_grad_clip_mode: str = param("batch", accepts=one_of(CLIP_MODES))
     """"batch": one L2 norm over the whole minibatch's ∇_a E (B × A) [C]; "per_sample": each
     sample's gradient clipped to langevin_grad_clip/√B, the same step when gradients are alike
     without coupling unrelated samples [D]."""
-    langevin_fused: bool = True
+    langevin_fused: bool = param(True, accepts=BOOL)
     """Each chain step's energy gradient through torch.compile, which fuses the element-wise work
     of every critic layer [D]: same maths to float rounding, the chain ~1.3-1.5x faster at the
     paper's sizes, for a one-off compile of ~15-40 s per process (README, speed). False: the eager
     hand-written backward. Falls back to it, with a warning, where compiling fails."""
-    langevin_dtype: str = "float32"
+    langevin_dtype: str = param("float32", accepts=one_of(LANGEVIN_DTYPES))
     """Input dtype of the chain's critic matmuls: "float32" | "bfloat16" (action, energy and update
     stay float32) [D]. bfloat16 pays only on CPUs with native bf16 matmuls (AVX512-BF16, AMX);
     on AVX2-only CPUs it is far slower. Its end points differ from float32's by far less than the
     chain's own noise (tests/test_fused_energy.py)."""
 
     # --- critics (docs/spec.md §2, eqs. 12-13) ---
-    cost_gamma: float = 0.99
+    cost_gamma: float = param(0.99, accepts=FRACTION)
     """γ_C, cost discount in the cost critic's target [C; D: γ_C = 1 leaves Q_C unbounded]."""
-    reward_scale: float = 10.0
+    reward_scale: float = param(10.0, accepts=NON_NEGATIVE)
     """k_r, multiplies the reward in the reward critic's target [C]; cost is unscaled."""
-    bootstrap_on_truncation: bool = True
+    bootstrap_on_truncation: bool = param(True, accepts=BOOL)
     """Bootstrap through time-limit truncation [D]; False treats it as terminal, like [C]."""
-    critic_lr: float = 3e-4
+    critic_lr: float = param(3e-4, accepts=POSITIVE)
     """Adam learning rate of the four critics at the start of the run [P]."""
-    critic_hidden: tuple = (256, 256, 256)
+    critic_hidden: tuple = param((256, 256, 256), accepts=LAYERS)
     """Hidden layers of each critic (obs+act → Mish MLP → Q) [C]."""
 
     # --- actor (docs/spec.md §3, eqs. 15-16) ---
-    beta: float = 0.0
-    """β, weight of KL(π_φ ‖ π_φ') in the actor loss eq. (16) [C: 0; P Table 3 "PR"]. ≥ 0."""
-    actor_chain_at: str = "next"
+    beta: float = param(0.0, accepts=NON_NEGATIVE)
+    """β, weight of KL(π_φ ‖ π_φ') in the actor loss eq. (16) [C: 0; P Table 3 "PR"]."""
+    actor_chain_at: str = param("next", accepts=one_of(CHAIN_AT))
     """Where the actor's target chain runs: "next" reuses the critic chain at s' [C];
     "current" runs a second chain at s as eq. (15) writes [P]."""
-    actor_lr: float = 3e-4
+    actor_lr: float = param(3e-4, accepts=POSITIVE)
     """Adam learning rate of the generator actor at the start of the run [P]."""
-    actor_grad_clip: float | None = 40.0
+    actor_grad_clip: float | None = param(40.0, accepts=or_none(POSITIVE))
     """Global gradient-norm clip of the actor [C]; None = off."""
-    actor_update_start_iteration: int = 1
+    actor_update_start_iteration: int = param(1, accepts=INT_GE_0)
     """First training iteration (0-based) whose minibatches update the actor [C: after the first]."""
-    actor_hidden: tuple = (256, 256)
+    actor_hidden: tuple = param((256, 256), accepts=LAYERS)
     """Hidden layers of the Gaussian generator actor [P Tables 4-5]."""
-    actor_activation: str = "tanh"
+    actor_activation: str = param("tanh", accepts=one_of(ACTIVATIONS))
     """Activation of the actor MLP [P Tables 4-5]."""
-    log_std_init: float = -0.5
+    log_std_init: float = param(-0.5, accepts=FINITE)
     """Initial state-independent log-std of the actor [P Tables 4-5]."""
-    actor_mean_init_scale: float | None = 0.1
+    actor_mean_init_scale: float | None = param(0.1, accepts=or_none(POSITIVE))
     """The actor's mean-head weights are multiplied by this at init and its bias zeroed [C], so
     the first policy acts near 0; None keeps nn.Linear's init of the head."""
 
     # --- Lagrange multiplier (docs/spec.md §4, eq. 14) ---
-    nu_init: float = 0.0
-    """ν₀ [P, C]. ≥ 0."""
-    nu_lr: float = 0.01
-    """α_ν, step of the projected ν update eq. (14) [P, C]. ≥ 0 (0 pins ν at ν₀)."""
-    nu_max_adaptive: bool = True
+    nu_init: float = param(0.0, accepts=NON_NEGATIVE)
+    """ν₀, the Lagrange multiplier at the start [P, C]."""
+    nu_lr: float = param(0.01, accepts=NON_NEGATIVE)
+    """α_ν, step of the projected ν update eq. (14) [P, C]; 0 pins ν at ν₀."""
+    nu_max_adaptive: bool = param(True, accepts=BOOL)
     """Upper bound on ν [C]: 2 in the first iteration, then 2·|mean y_R| / |mean y_C| over the
     latest iteration's minibatches, so the cost term cannot take over the chain while the reward
     critic is small (docs/spec.md §4). False: ν unbounded, as [P] writes eq. (14)."""
 
     # --- data and schedule (docs/spec.md §5) ---
-    env_steps_per_iteration: int = 5000
+    env_steps_per_iteration: int = param(5000, accepts=INT_GE_1)
     """Env steps sampled per iteration ("batch size" in Tables 4-5) [P]."""
-    replay_capacity: int = 50_000
+    replay_capacity: int = param(50_000, accepts=INT_GE_1)
     """Replay buffer capacity in env steps [P, C]."""
-    lac_minibatch_size: int = 256
+    lac_minibatch_size: int = param(256, accepts=INT_GE_1)
     """Minibatch size of the gradient steps [P]."""
-    gradient_passes: float = 1.0
+    gradient_passes: float = param(1.0, accepts=POSITIVE)
     """Passes over the buffer per iteration ("1 epoch") [P, C]: ≈ buffer/minibatch steps."""
-    polyak_tau: float = 0.005
+    polyak_tau: float = param(0.005, accepts=FRACTION)
     """Polyak τ for all target networks, applied after every gradient step [C]."""
-    polyak_from_actor_start: bool = True
+    polyak_from_actor_start: bool = param(True, accepts=BOOL)
     """Polyak updates begin with the first actor update (actor_update_start_iteration) [C];
     False: from the first gradient step."""
-    lr_schedule: str = "linear"
+    lr_schedule: str = param("linear", accepts=one_of(LR_SCHEDULES))
     """"linear": both learning rates decay linearly from their start to lr_final_fraction × start
     over total_env_steps [C], through RLlib's lr schedules; "constant": no decay."""
-    lr_final_fraction: float = 0.5
-    """The learning rates at the end of the budget, as a fraction of their start [C: 0.5]. (0, 1]."""
-    total_env_steps: int | None = None
+    lr_final_fraction: float = param(0.5, accepts=FRACTION)
+    """The learning rates at the end of the budget, as a fraction of their start [C: 0.5]."""
+    total_env_steps: int | None = param(None, accepts=or_none(INT_GE_1))
     """The run's budget in env steps, the horizon of the linear lr decay. lac-train and the sweep
     set it from their budget; required when lr_schedule is "linear"."""
-    num_envs_per_env_runner: int = 1
+    num_envs_per_env_runner: int = param(1, accepts=INT_GE_1)
     """Envs each env runner steps together (RLlib's own field, a gymnasium SyncVectorEnv) [D]:
     RLlib's per-step work (connectors, episode bookkeeping) is then paid once per batch of envs
     instead of once per step. The policy is fixed within an iteration, so this changes only which
     episode segments an iteration holds. The presets choose counts that keep the episodes of an
     iteration what one env gives: 1000-step episodes, 20k steps over 10 envs (safety_gym) and 5k
     over 5 (mujoco) complete 20 and 5 whole episodes per iteration. docs/speed.md has the figures."""
-    random_iterations: int = 5
+    random_iterations: int = param(5, accepts=INT_GE_0)
     """Iterations that act uniformly at random before the generator takes over [C]."""
-    obs_normalization: bool = True
+    obs_normalization: bool = param(True, accepts=BOOL)
     """Running mean/std observation filter [C]; its state is checkpointed."""
-    obs_clip: float = 5.0
+    obs_clip: float = param(5.0, accepts=POSITIVE)
     """Clip of the normalised observation [C]."""
-    obs_std_floor: float = 1e-2
+    obs_std_floor: float = param(1e-2, accepts=NON_NEGATIVE)
     """The filter divides by max(std, obs_std_floor) [C], so a near-constant observation
     dimension is not blown up to ±obs_clip; 0 = RLlib's std + 1e-8."""
-    store_replay_buffer: bool = True
+    store_replay_buffer: bool = param(True, accepts=BOOL)
     """Keep the replay buffer in checkpoints [D; RLlib's store_buffer_in_checkpoints], so a resumed
     or retried run trains on the data it had, not on an empty buffer; False keeps checkpoints
     small (a full PointGoal1 buffer is tens of MB)."""
-    torch_threads: int = 1
+    torch_threads: int = param(1, accepts=INT_GE_1)
     """Intra-op torch threads of the learner process [D]: minibatch tensors are small, and on a
     shared 2-core machine 2 threads made one critic-gradient op ~250x slower than 1 (measured).
     A sweep sets it to the CPUs of a trial."""
 
     # --- task ---
-    cost_limit: float | None = None
+    cost_limit: float | None = param(None, accepts=or_none(NON_NEGATIVE))
     """b; None = the task's limit (docs/spec.md §6)."""
-    episode_cost_discount: float | None = None
+    episode_cost_discount: float | None = param(None, accepts=or_none(FRACTION))
     """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
+
+
+#: Each field's accepted values, as its ``param(..., accepts=...)`` declares them.
+FIELD_RANGES: dict[str, Accepted] = {f.name: f.metadata["accepts"] for f in dataclasses.fields(LACParams)}
 
 
 
@@ -199,63 +252,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 def check_field(name: str, value: Any) -> None:
-    """Raise a ValueError naming the field and its accepted values if ``value`` is bad."""
-
-    def bad(accepted: str):
-        raise ValueError(f"LAC config field {name}={value!r} is invalid; accepted: {accepted}")
-
-    def real(x) -> bool:
-        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-    positive = {"langevin_step_size", "temperature", "critic_lr", "actor_lr", "obs_clip",
-                "gradient_passes"}
-    non_negative = {"logp_weight", "beta", "nu_init", "nu_lr", "reward_scale", "obs_std_floor"}
-    pos_int = {"langevin_steps", "env_steps_per_iteration", "replay_capacity", "lac_minibatch_size",
-               "torch_threads", "num_envs_per_env_runner"}
-    if name in pos_int and not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
-        bad("an integer >= 1")
-    if name in positive and not (real(value) and value > 0):
-        bad("a finite number > 0")
-    if name in non_negative and not (real(value) and value >= 0):
-        bad("a finite number >= 0")
-    if name in ("random_iterations", "actor_update_start_iteration") and not (
-        isinstance(value, int) and value >= 0
-    ):
-        bad("an integer >= 0")
-    if name in ("cost_gamma", "episode_cost_discount") and value is not None and not (
-        real(value) and 0 < value <= 1
-    ):
-        bad("a number in (0, 1]")
-    if name in ("polyak_tau", "lr_final_fraction") and not (real(value) and 0 < value <= 1):
-        bad("a number in (0, 1]")
-    if name in ("langevin_grad_clip", "actor_grad_clip", "actor_mean_init_scale") and value is not None and not (
-        real(value) and value > 0
-    ):
-        bad("None or a finite number > 0")
-    if name == "cost_limit" and value is not None and not (real(value) and value >= 0):
-        bad("None or a finite number >= 0")
-    if name == "langevin_start" and value not in START_MODES:
-        bad(" | ".join(START_MODES))
-    if name == "actor_chain_at" and value not in CHAIN_AT:
-        bad(" | ".join(CHAIN_AT))
-    if name == "langevin_grad_clip_mode" and value not in GRAD_CLIP_MODES:
-        bad(" | ".join(GRAD_CLIP_MODES))
-    if name == "lr_schedule" and value not in LR_SCHEDULES:
-        bad(" | ".join(LR_SCHEDULES))
-    if name == "langevin_dtype" and value not in LANGEVIN_DTYPES:
-        bad(" | ".join(LANGEVIN_DTYPES))
-    if name == "total_env_steps" and value is not None and not (
-        isinstance(value, int) and not isinstance(value, bool) and value >= 1
-    ):
-        bad("None or an integer >= 1")
-    if name in ("nu_max_adaptive", "polyak_from_actor_start", "langevin_fused", "langevin_clamp",
-                "obs_normalization",
-                "bootstrap_on_truncation", "store_replay_buffer") and not isinstance(value, bool):
-        bad("True | False")
-    if name in ("actor_hidden", "critic_hidden") and not (
-        len(tuple(value)) >= 1 and all(isinstance(h, int) and h >= 1 for h in value)
-    ):
-        bad("a non-empty sequence of integers >= 1")
+    """Raise a ValueError naming the field, the value and the accepted values if ``value`` is bad."""
+    accepted = FIELD_RANGES.get(name)
+    if accepted is not None and not accepted.test(value):
+        raise ValueError(f"LAC config field {name}={value!r} is invalid; accepted: {accepted.text}")
 
 
 class LACConfig(AlgorithmConfig):
@@ -289,13 +289,14 @@ class LACConfig(AlgorithmConfig):
 
         self.callbacks_class = EpisodeCostCallback
 
+    @override(AlgorithmConfig)
     def training(self, **kwargs) -> "LACConfig":
         own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELD_NAMES}
         super().training(**kwargs)
         for name, value in own.items():
             if value is NotProvided:
                 continue
-            if name in ("actor_hidden", "critic_hidden"):
+            if name in ("actor_hidden", "critic_hidden") and isinstance(value, list):
                 value = tuple(value)
             check_field(name, value)
             setattr(self, name, value)
@@ -341,6 +342,7 @@ class LACConfig(AlgorithmConfig):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(LACParams)}
 
     # ----- RLlib hooks -----
+    @override(AlgorithmConfig)
     def validate(self) -> None:
         super().validate()
         for name, value in self.lac_params().items():
@@ -358,6 +360,7 @@ class LACConfig(AlgorithmConfig):
             return lr
         return [[0, lr], [int(self.total_env_steps), lr * self.lr_final_fraction]]
 
+    @override(AlgorithmConfig)
     def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
         # "auto" splits env_steps_per_iteration (not the minibatch size) over the runners.
         if self.rollout_fragment_length != "auto":
@@ -367,6 +370,7 @@ class LACConfig(AlgorithmConfig):
         idx = max(worker_index - 1, 0)
         return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
 
+    @override(AlgorithmConfig)
     def build_env_to_module_connector(self, env=None, spaces=None, device=None):
         pipeline = super().build_env_to_module_connector(env=env, spaces=spaces, device=device)
         if self.obs_normalization:
@@ -376,17 +380,20 @@ class LACConfig(AlgorithmConfig):
             pipeline.prepend(FlooredMeanStdFilter(clip_by_value=self.obs_clip, std_floor=self.obs_std_floor))
         return pipeline
 
+    @override(AlgorithmConfig)
     def get_default_rl_module_spec(self) -> RLModuleSpec:
         from lac_rllib.module import LACTorchRLModule
 
         return RLModuleSpec(module_class=LACTorchRLModule)
 
+    @override(AlgorithmConfig)
     def get_default_learner_class(self):
         from lac_rllib.learner import LACTorchLearner
 
         return LACTorchLearner
 
     @property
+    @override(AlgorithmConfig)
     def _model_config_auto_includes(self) -> dict[str, Any]:
         # The module needs the network sizes and the chain's settings (it runs the chain).
         return {**super()._model_config_auto_includes, **self.lac_params()}
@@ -399,3 +406,17 @@ SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_th
 #: Fields added after runs and checkpoints already existed, with the value that reproduces what
 #: such a run did (read where an old run's settings or an old checkpoint's model config lack them).
 LEGACY_VALUES = {"langevin_fused": False, "langevin_dtype": "float32", "num_envs_per_env_runner": 1}
+
+
+def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
+                 timesteps: int | None = None) -> LACConfig:
+    """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed).
+
+    The budget is the horizon of the learning-rate decay unless ``sets`` names another.
+    """
+    if timesteps is not None:
+        sets = {"total_env_steps": int(timesteps), **sets}
+    config = LACConfig().task(task).training(**sets).debugging(seed=seed)
+    config.env_runners(num_env_runners=num_env_runners)
+    config.validate()
+    return config

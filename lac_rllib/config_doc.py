@@ -12,7 +12,7 @@ import inspect
 import re
 import sys
 
-from lac_rllib.config import PRESETS, LACParams, field_docs
+from lac_rllib.config import FIELD_RANGES, PRESETS, LACParams, field_docs
 from lac_rllib.tasks import get_task, known_tasks
 
 REGENERATE = "python -m lac_rllib.config_doc > docs/config.md"
@@ -53,14 +53,16 @@ def config_markdown() -> str:
         "",
         f"*Generated from `lac_rllib/config.py`: do not edit; regenerate with `{REGENERATE}`.*",
         "",
-        "Every field of `LACParams`, with its default and its docstring. Set a field with",
+        "Every field of `LACParams`, with its default, the values it accepts and its docstring. Set a field with",
         "`LACConfig().training(name=value)`, `lac-train --set name=value` or the sweep's `--set name=value`.",
         "Source tags: [P] paper, [C] authors' code, [F] FOCOPS, [D] our decision; the formulas and the",
         "reasons are in [spec.md](spec.md).",
     ]
     for title, names in field_groups():
-        out += ["", f"## {title[:1].upper()}{title[1:]}", "", "| field | default | meaning |", "|---|---|---|"]
-        out += [f"| `{n}` | {_code(defaults[n])} | {_cell(docs.get(n, ''))} |" for n in names]
+        out += ["", f"## {title[:1].upper()}{title[1:]}", "", "| field | default | accepted | meaning |",
+                "|---|---|---|---|"]
+        out += [f"| `{n}` | {_code(defaults[n])} | {_cell(FIELD_RANGES[n].text)} | {_cell(docs.get(n, ''))} |"
+                for n in names]
 
     touched = [n for n in defaults if any(n in p for p in PRESETS.values())]
     out += [

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.connectors.connector_v2 import ConnectorV2
+from ray.rllib.utils.annotations import override
 
 COSTS = "costs"
 # Keys in episode.custom_data (they survive episode chunking: cut() copies custom_data).
@@ -38,6 +39,7 @@ class AddCostsFromInfos(ConnectorV2):
     observations (index 0 is the reset info), so the cost of step t is ``infos[t + 1]``.
     """
 
+    @override(ConnectorV2)
     def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
         if COSTS in batch:
             return batch
@@ -62,6 +64,7 @@ class ShuffleRows(ConnectorV2):
         super().__init__(*args, **kwargs)
         self._rng = np.random.default_rng(seed)
 
+    @override(ConnectorV2)
     def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
         for module_id, columns in batch.items():
             if not isinstance(columns, dict):
@@ -82,22 +85,26 @@ class EpisodeCostCallback(RLlibCallback):
     completed in the latest batch for the ν update, and are logged as RLlib env-runner metrics.
     """
 
+    @override(RLlibCallback)
     def on_environment_created(self, *, env_runner, env, **kwargs) -> None:
         # RLlib samples random actions (the first iterations, [C]) from the vector env's action
         # space and never seeds it; seed it like the envs, so a run repeats from config.seed.
         if env_runner.config.seed is not None:
             env.action_space.seed(env_runner.config.seed + env_runner.worker_index)
 
+    @override(RLlibCallback)
     def on_episode_start(self, *, episode, **kwargs) -> None:
         episode.custom_data[EPISODE_COST] = 0.0
         episode.custom_data[EPISODE_RETURN] = 0.0
 
+    @override(RLlibCallback)
     def on_episode_step(self, *, episode, env_runner, **kwargs) -> None:
         t = episode.t - 1  # global index of the step just taken
         gamma_c = env_runner.config.effective_episode_cost_discount
         episode.custom_data[EPISODE_COST] += gamma_c**t * step_cost(episode.get_infos(-1))
         episode.custom_data[EPISODE_RETURN] += float(episode.get_rewards(-1))
 
+    @override(RLlibCallback)
     def on_episode_end(self, *, episode, metrics_logger, **kwargs) -> None:
         metrics_logger.log_value("episode_cost_mean", episode.custom_data[EPISODE_COST], window=100)
 

@@ -306,7 +306,8 @@ def _video_env(policy: Policy):
     modes = (getattr(probe, "metadata", None) or {}).get("render_modes", [])
     probe.close()
     if "rgb_array" not in modes:
-        return None, f"task {policy.task_id} has no renderer (render modes: {list(modes) or 'none'}); continuing without video"
+        return None, (f"task {policy.task_id} has no renderer (render modes: {list(modes) or 'none'}); "
+                      "continuing without video")
     # MuJoCo picks its GL backend when first imported: headless EGL unless the user chose.
     os.environ.setdefault("MUJOCO_GL", "egl")
     if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):

@@ -22,6 +22,8 @@ import math
 
 import torch
 
+from lac_rllib.networks import cost_rows, reward_rows
+
 DTYPES = ("float32", "bfloat16")
 _TORCH_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 logger = logging.getLogger(__name__)
@@ -70,12 +72,13 @@ def energy_and_grad(a, proj, w_a, ws, ws_t, bs, mean, inv_var, logp_const, nu, *
     # min over reward critics, max over cost critics: the (sub)gradient flows through the
     # selected member only, −1/λ on the argmin reward critic and +ν/λ on the argmax cost critic.
     cols = torch.arange(q.shape[1], device=q.device)
+    q_r, q_c = reward_rows(q, n_reward), cost_rows(q, n_reward)
     coef = torch.zeros_like(q)
-    coef[q[:n_reward].argmin(0), cols] = -inv_lam
-    energy = -inv_lam * q[:n_reward].min(0).values
+    coef[q_r.argmin(0), cols] = -inv_lam
+    energy = -inv_lam * q_r.min(0).values
     if n_members > n_reward:
-        coef[n_reward + q[n_reward:].argmax(0), cols] = nu * inv_lam
-        energy = energy + nu * inv_lam * q[n_reward:].max(0).values
+        coef[n_reward + q_c.argmax(0), cols] = nu * inv_lam
+        energy = energy + nu * inv_lam * q_c.max(0).values
     g = coef.unsqueeze(-1)                                           # dL/dz_out, (E, B, 1)
     for w_t, dh in zip(reversed(ws_t), reversed(derivs)):
         g = _mm(g, w_t) * dh                                         # back through Linear, then act

@@ -26,12 +26,13 @@ from typing import Callable
 import torch
 
 from lac_rllib.fused_energy import make_grad_fn
-from lac_rllib.networks import CriticEnsemble
+from lac_rllib.networks import CriticEnsemble, cost_rows, reward_rows
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
-STARTS = ("informative", "noninformative")
-
-
+# Where a chain starts (the ``langevin_start`` field): ã_0 ~ π_φ'(·|s) (eq. 11), or N(0, I) (NI).
+INFORMATIVE, NONINFORMATIVE = "informative", "noninformative"
+STARTS = (INFORMATIVE, NONINFORMATIVE)
+# How ∇_a E is clipped (the ``langevin_grad_clip_mode`` field), see clip_grad.
 CLIP_MODES = ("batch", "per_sample")
 
 
@@ -141,17 +142,17 @@ def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch
         # min/max are piecewise: the (sub)gradient flows through the selected member only,
         # −1/λ on the argmin reward critic and +ν/λ on the argmax cost critic, per sample.
         c = torch.zeros_like(q)
-        c[q[:nr].argmin(0), cols] = -inv_lam
+        c[reward_rows(q, nr).argmin(0), cols] = -inv_lam
         if critics.n_cost:
-            c[nr + q[nr:].argmax(0), cols] = nu * inv_lam
+            c[nr + cost_rows(q, nr).argmax(0), cols] = nu * inv_lam
         return c
 
     def grad_fn(a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         q, grad_q = critics.q_and_action_grad(proj, a, coef_of)
         diff = a - mean
-        energy = -inv_lam * q[:nr].min(0).values
+        energy = -inv_lam * reward_rows(q, nr).min(0).values
         if critics.n_cost:
-            energy = energy + nu * inv_lam * q[nr:].max(0).values
+            energy = energy + nu * inv_lam * cost_rows(q, nr).max(0).values
         energy = energy + logp_weight * 0.5 * (diff * diff * inv_var).sum(-1) + logp_const
         return energy, grad_q + logp_weight * diff * inv_var   # ∇(−w log π) = w(a−μ)/σ²
 
@@ -160,7 +161,7 @@ def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch
 
 def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tensor,
                    log_std: torch.Tensor, *, steps: int, step_size: float, temperature: float,
-                   nu, logp_weight: float = 1.0, start: str = "informative", low=None, high=None,
+                   nu, logp_weight: float = 1.0, start: str = INFORMATIVE, low=None, high=None,
                    grad_clip: float | None = None, grad_clip_mode: str = "batch",
                    noise: torch.Tensor | None = None,
                    generator: torch.Generator | None = None, fused: bool = False,
@@ -187,7 +188,7 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
         z0 = noise[0] if noise is not None else torch.randn(
             shape, generator=generator, dtype=mean.dtype, device=mean.device)
         # eq. (11): start from the generator's own sample; NI: start from N(0, I).
-        a0 = mean + torch.exp(log_std) * z0 if start == "informative" else z0
+        a0 = mean + torch.exp(log_std) * z0 if start == INFORMATIVE else z0
         proj = critics.project_state(obs)
         if fused or dtype != "float32":
             grad_fn = make_grad_fn(critics, proj, mean, log_std, temperature=temperature, nu=nu,
@@ -211,7 +212,8 @@ def naive_langevin_chain(critics: CriticEnsemble, actor_mean_logstd_fn, obs: tor
         mean, log_std = actor_mean_logstd_fn(obs)
         q = critics(obs, a)
         logp = torch.distributions.Normal(mean, log_std.exp()).log_prob(a).sum(-1)
-        return (nu * q[nr:].max(0).values - q[:nr].min(0).values) / temperature - logp_weight * logp
+        q_r, q_c = reward_rows(q, nr), cost_rows(q, nr)
+        return (nu * q_c.max(0).values - q_r.min(0).values) / temperature - logp_weight * logp
 
     def grad_fn(a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         with torch.enable_grad():

@@ -21,6 +21,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.utils import make_target_network
 from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
+from ray.rllib.utils.annotations import override
 
 from lac_rllib.config import LEGACY_VALUES
 from lac_rllib.langevin import ChainResult, langevin_chain
@@ -38,6 +39,7 @@ CHAIN = "chain"  # ChainResult of the critic-target chain
 class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
     framework = "torch"
 
+    @override(TorchRLModule)
     def setup(self):
         cfg = self.model_config
         obs_dim = int(self.observation_space.shape[0])
@@ -54,14 +56,17 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         self._high = torch.tensor(np.array(self.action_space.high), dtype=torch.float32)
 
     # ----- acting (env runners) -----
+    @override(TorchRLModule)
     def _forward_inference(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
         mean, log_std = self.actor(batch[Columns.OBS])
         return {Columns.ACTION_DIST_INPUTS: torch.cat([mean, log_std], dim=-1)}
 
+    @override(TorchRLModule)
     def _forward_exploration(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
         return self._forward_inference(batch)
 
     # ----- training (learner) -----
+    @override(TorchRLModule)
     def _forward_train(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
         obs, next_obs = batch[Columns.OBS], batch[Columns.NEXT_OBS]
         with torch.no_grad():
@@ -110,16 +115,20 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         )
 
     # ----- RLlib APIs -----
+    @override(TargetNetworkAPI)
     def make_target_networks(self) -> None:
         self.target_actor = make_target_network(self.actor)
         self.target_critics = make_target_network(self.critics)
 
+    @override(TargetNetworkAPI)
     def get_target_network_pairs(self):
         return [(self.actor, self.target_actor), (self.critics, self.target_critics)]
 
+    @override(TargetNetworkAPI)
     def forward_target(self, batch: dict[str, Any]) -> dict[str, Any]:
         return {"q": self.target_critics(batch[Columns.OBS], batch[Columns.ACTIONS])}
 
+    @override(InferenceOnlyAPI)
     def get_non_inference_attributes(self) -> list[str]:
         return ["critics", "target_critics", "target_actor"]
 

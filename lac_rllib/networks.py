@@ -17,6 +17,7 @@ from torch import nn
 
 _ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "mish": nn.Mish}
 _ACT_FNS = {"tanh": torch.tanh, "relu": torch.relu, "mish": F.mish}
+ACTIVATIONS = tuple(_ACTIVATIONS)  # the accepted names (LACParams.actor_activation)
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -73,6 +74,20 @@ def gaussian_kl(mean_p: torch.Tensor, log_std_p: torch.Tensor,
     return (log_std_q - log_std_p + 0.5 * (var_ratio + mahal - 1.0)).sum(-1)
 
 
+def reward_rows(q: torch.Tensor, n_reward: int) -> torch.Tensor:
+    """Q_R1..Q_Rn: the reward critics' rows of a critic-ensemble output q (E, ...), a view.
+
+    A plain function of a tensor and an int, so torch.compile traces it (lac_rllib.fused_energy).
+    """
+    return q[:n_reward]
+
+
+def cost_rows(q: torch.Tensor, n_reward: int) -> torch.Tensor:
+    """Q_C1..Q_Cm: the cost critics' rows of a critic-ensemble output q (E, ...), a view (the
+    rows after the ``n_reward`` reward critics; empty when the ensemble has no cost critic)."""
+    return q[n_reward:]
+
+
 def _act_and_grad(name: str, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Activation value and its derivative at the pre-activation z (for the manual backward)."""
     if name == "mish":
@@ -98,9 +113,10 @@ class CriticEnsemble(nn.Module):
 
     Layer k holds ``weights[k]`` of shape (E, in, out) and ``biases[k]`` of shape (E, 1, out), so
     one ``baddbmm`` evaluates every member. Rows ``[:n_reward]`` are reward critics, rows
-    ``[n_reward:]`` cost critics. The first layer's input is concat(obs, act); its weight rows
-    ``[:obs_dim]`` act on the state and ``[obs_dim:]`` on the action, which is what lets the chain
-    compute the state part once (``project_state``) and only redo the action part per step.
+    ``[n_reward:]`` cost critics: read them with :func:`reward_rows` / :func:`cost_rows`. The
+    first layer's input is concat(obs, act); its weight rows ``[:obs_dim]`` act on the state and
+    ``[obs_dim:]`` on the action, which is what lets the chain compute the state part once
+    (``project_state``) and only redo the action part per step.
     """
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256, 256),
@@ -152,10 +168,10 @@ class CriticEnsemble(nn.Module):
         return self._tail(torch.baddbmm(self.biases[0], x, self.weights[0]))
 
     def q_reward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-        return self(obs, act)[: self.n_reward]
+        return reward_rows(self(obs, act), self.n_reward)
 
     def q_cost(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-        return self(obs, act)[self.n_reward:]
+        return cost_rows(self(obs, act), self.n_reward)
 
     # --- manual action gradient -------------------------------------------------------------
     @torch.no_grad()

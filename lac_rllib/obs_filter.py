@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 from ray.rllib.connectors.env_to_module.mean_std_filter import MeanStdFilter
+from ray.rllib.utils.annotations import override
 from ray.rllib.utils.filter import MeanStdFilter as _RunningMeanStd
 
 
@@ -23,6 +24,7 @@ class _FlooredRunningMeanStd(_RunningMeanStd):
             raise ValueError("FlooredMeanStdFilter supports Box observations only (no dict/tuple spaces)")
         self.std_floor = float(std_floor)
 
+    @override(_RunningMeanStd)
     def __call__(self, x, update: bool = True):
         x = np.asarray(x)
         orig_dtype = x.dtype
@@ -47,12 +49,14 @@ class FlooredMeanStdFilter(MeanStdFilter):
         self.std_floor = float(std_floor)
         super().__init__(*args, **kwargs)
 
+    @override(MeanStdFilter)
     def get_ctor_args_and_kwargs(self):
         # RLlib records the kwargs of MeanStdFilter.__init__ only; a checkpoint must rebuild
         # this class with its floor.
         args, kwargs = super().get_ctor_args_and_kwargs()
         return args, {**kwargs, "std_floor": self.std_floor}
 
+    @override(MeanStdFilter)
     def _init_new_filters(self):
         super()._init_new_filters()
         # Same shapes and settings as RLlib's; set_state/merge_states mutate these in place.

@@ -17,7 +17,15 @@ import shutil
 import sys
 import time
 
-from lac_rllib.config import FIELD_NAMES, LEGACY_VALUES, SPEED_FIELDS, LACConfig, field_docs
+from lac_rllib.config import (
+    FIELD_NAMES,
+    FIELD_RANGES,
+    LEGACY_VALUES,
+    SPEED_FIELDS,
+    LACConfig,
+    build_config,
+    field_docs,
+)
 from lac_rllib.tasks import known_tasks
 
 
@@ -36,20 +44,6 @@ def parse_sets(pairs: list[str]) -> dict:
         except (ValueError, SyntaxError):
             out[name] = raw  # plain strings such as informative / next
     return out
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None) -> LACConfig:
-    """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed).
-
-    The budget is the horizon of the learning-rate decay unless ``sets`` names another.
-    """
-    if timesteps is not None:
-        sets = {"total_env_steps": int(timesteps), **sets}
-    config = LACConfig().task(task).training(**sets).debugging(seed=seed)
-    config.env_runners(num_env_runners=num_env_runners)
-    config.validate()
-    return config
 
 
 def _fmt(x) -> str:
@@ -188,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     docs = field_docs()
     parser = argparse.ArgumentParser(
         prog="lac-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="LAC fields for --set:\n" + "\n".join(f"  {k}: {docs.get(k, '')}" for k in sorted(FIELD_NAMES)),
+        epilog="LAC fields for --set:\n" + "\n".join(
+            f"  {k}: {docs.get(k, '')} Accepted: {FIELD_RANGES[k].text}." for k in sorted(FIELD_NAMES)),
     )
     parser.add_argument("--task", default="lac/PointHazard-v0", help=f"one of: {', '.join(known_tasks())}")
     parser.add_argument("--timesteps", type=int, required=True, help="env steps to train for (>= 1)")

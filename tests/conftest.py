@@ -54,7 +54,8 @@ def train_batch(algo) -> dict:
 @pytest.fixture(scope="session")
 def checkpoint(ray_session, tmp_path_factory):
     """One tiny PointHazard checkpoint per session (lac-train's layout), for restore/evaluation tests."""
-    from lac_rllib.train import build_config, train
+    from lac_rllib.config import build_config
+    from lac_rllib.train import train
 
     out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"
     config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,

@@ -4,13 +4,14 @@
 import numpy as np
 import pytest
 import torch
+from conftest import tiny_config, train_batch
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
-from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
+from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, LEARNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from conftest import tiny_config, train_batch
-from lac_rllib.algorithm import LAC
+from lac_rllib.algorithm import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, LAC
 from lac_rllib.connectors import COSTS
+from lac_rllib.learner import NU, NU_MAX, TARGET_COST_MEAN, TARGET_REWARD_MEAN, TS_EPISODE_COST
 
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 
@@ -28,13 +29,13 @@ def test_every_train_row_carries_its_own_cost(ray_session, num_env_runners, num_
             result = algo.train()
         b = train_batch(algo)
         t = b[Columns.OBS][:, 0]
-        assert len(t) == result["env_steps"] >= 150
+        assert len(t) == result[ENV_STEPS] >= 150
         np.testing.assert_array_equal(b[COSTS], 2 * t + 1)
         np.testing.assert_array_equal(b[Columns.REWARDS], -t)
         np.testing.assert_array_equal(b[Columns.NEXT_OBS][:, 0], t + 1)
         np.testing.assert_array_equal(b[Columns.TERMINATEDS], t == 6)
         # Episode totals cross chunk boundaries: Σ_{t<7} (2t+1) = 49, Σ −t = −21.
-        assert result["episode_cost"] == 49.0 and result["episode_return"] == -21.0
+        assert result[EPISODE_COST] == 49.0 and result[EPISODE_RETURN] == -21.0
     finally:
         algo.stop()
 
@@ -45,11 +46,11 @@ def test_nu_follows_completed_episodes_only(ray_session):
     algo = config.build_algo()
     try:
         # 7 complete episodes (Ĵ_C = 49 each) and a partial one per batch: ν += 0.01·(49 − 40).
-        assert algo.train()["nu"] == pytest.approx(0.09, abs=1e-6)
-        assert algo.train()["nu"] == pytest.approx(0.18, abs=1e-6)
+        assert algo.train()[NU] == pytest.approx(0.09, abs=1e-6)
+        assert algo.train()[NU] == pytest.approx(0.18, abs=1e-6)
         # No completed episode → no ν step.
         learner = algo.learner_group._learner
-        learner.before_gradient_based_update(timesteps={"lac_episode_cost": None})
+        learner.before_gradient_based_update(timesteps={TS_EPISODE_COST: None})
         assert float(learner.module[DEFAULT_MODULE_ID].nu) == pytest.approx(0.18, abs=1e-6)
     finally:
         algo.stop()
@@ -188,12 +189,12 @@ def test_nu_bound_is_two_then_the_ratio_of_mean_targets(ray_session):
         second = algo.train()
     finally:
         algo.stop()
-    learner1, learner2 = first["learners"][DEFAULT_MODULE_ID], second["learners"][DEFAULT_MODULE_ID]
-    assert first["nu"] == pytest.approx(2.0) and learner1["nu_max"] == pytest.approx(2.0)
-    ratio = 2 * abs(learner1["target_reward_mean"]) / abs(learner1["target_cost_mean"])
+    learner1, learner2 = first[LEARNER_RESULTS][DEFAULT_MODULE_ID], second[LEARNER_RESULTS][DEFAULT_MODULE_ID]
+    assert first[NU] == pytest.approx(2.0) and learner1[NU_MAX] == pytest.approx(2.0)
+    ratio = 2 * abs(learner1[TARGET_REWARD_MEAN]) / abs(learner1[TARGET_COST_MEAN])
     assert 2.0 < ratio < 2.0 + 49  # the check below tells the bound from both other outcomes
-    assert learner2["nu_max"] == pytest.approx(ratio, rel=1e-5)
-    assert second["nu"] == pytest.approx(ratio, rel=1e-5)
+    assert learner2[NU_MAX] == pytest.approx(ratio, rel=1e-5)
+    assert second[NU] == pytest.approx(ratio, rel=1e-5)
 
 
 @pytest.mark.parametrize("from_actor_start", [True, False])
@@ -229,7 +230,7 @@ def test_same_seed_same_run(ray_session):
             state = {k: v.detach().clone() for k, v in module.state_dict().items()}
         finally:
             algo.stop()
-        return [(r["nu"], r["episode_return"], r["episode_cost"]) for r in results], state
+        return [(r[NU], r[EPISODE_RETURN], r[EPISODE_COST]) for r in results], state
 
     (res_a, w_a), (res_b, w_b) = run(), run()
     assert res_a == res_b

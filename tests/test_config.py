@@ -1,11 +1,12 @@
 """LACConfig: the defaults of docs/spec.md, presets, and clear early errors for bad values."""
 
+import dataclasses
 import subprocess
 import sys
 
 import pytest
 
-from lac_rllib.config import FIELD_NAMES, LACConfig, LACParams, field_docs
+from lac_rllib.config import FIELD_NAMES, FIELD_RANGES, LACConfig, LACParams, check_field, field_docs
 
 
 @pytest.mark.parametrize("field,value,accepted", [
@@ -26,6 +27,10 @@ from lac_rllib.config import FIELD_NAMES, LACConfig, LACParams, field_docs
     ("obs_std_floor", -1e-2, ">= 0"),
     ("nu_max_adaptive", "yes", "True | False"),
     ("total_env_steps", 0, "None or an integer >= 1"),
+    ("random_iterations", -1, "an integer >= 0"),
+    ("critic_hidden", 64, "a non-empty sequence of integers >= 1"),
+    ("actor_activation", "gelu", "tanh | relu | mish"),
+    ("log_std_init", float("inf"), "a finite number"),
 ])
 def test_bad_values_name_field_and_accepted_range(field, value, accepted):
     with pytest.raises(ValueError) as err:
@@ -41,7 +46,8 @@ def test_unknown_task_lists_known_ones():
 def test_spec_defaults_and_presets():
     c = LACConfig()
     assert (c.langevin_steps, c.langevin_step_size, c.temperature, c.beta) == (30, 1e-4, 1e-3, 0.0)
-    assert (c.nu_lr, c.nu_init, c.polyak_tau, c.reward_scale, c.cost_gamma, c.gamma) == (0.01, 0.0, 0.005, 10.0, 0.99, 0.99)
+    got = (c.nu_lr, c.nu_init, c.polyak_tau, c.reward_scale, c.cost_gamma, c.gamma)
+    assert got == (0.01, 0.0, 0.005, 10.0, 0.99, 0.99)
     assert (c.replay_capacity, c.lac_minibatch_size, c.random_iterations) == (50_000, 256, 5)
     # The authors' training dynamics (docs/spec.md, "Rule for defaults"): chain clip, ν bound, lr decay,
     # head init, std floor, Polyak from the first actor update.
@@ -68,6 +74,12 @@ def test_every_field_has_a_docstring():
     docs = field_docs()
     assert set(docs) == FIELD_NAMES == {f for f in LACParams.__dataclass_fields__}
     assert all(len(d) > 10 for d in docs.values())
+
+
+def test_every_field_declares_the_values_it_accepts_and_its_default_is_one():
+    assert set(FIELD_RANGES) == FIELD_NAMES
+    for f in dataclasses.fields(LACParams):
+        check_field(f.name, f.default)
 
 
 def test_task_convention_feeds_cost_limit_and_discount():

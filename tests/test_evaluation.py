@@ -18,7 +18,7 @@ from lac_rllib.evaluation import (
 )
 
 # One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
-pytestmark = pytest.mark.xdist_group("evaluation")
+pytestmark = [pytest.mark.xdist_group("evaluation"), pytest.mark.slow]
 
 TASK = "lac/PointHazard-v0"
 

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from lac_rllib.langevin import langevin_chain, naive_langevin_chain, run_chain
+from lac_rllib.langevin import INFORMATIVE, STARTS, langevin_chain, naive_langevin_chain, run_chain
 from lac_rllib.networks import CriticEnsemble, GaussianActor
 
 D64 = torch.float64
@@ -95,7 +95,7 @@ def _nets(seed=0):
 
 @pytest.mark.parametrize("temperature", [1e-3, 0.1, 2.0])
 @pytest.mark.parametrize("bounded", [False, True])
-@pytest.mark.parametrize("start", ["informative", "noninformative"])
+@pytest.mark.parametrize("start", STARTS)
 @pytest.mark.parametrize("clip", [None, ("batch", 50.0), ("per_sample", 50.0)])
 def test_efficient_chain_equals_naive(temperature, bounded, start, clip):
     critics, actor, obs = _nets()
@@ -108,7 +108,7 @@ def test_efficient_chain_equals_naive(temperature, bounded, start, clip):
     clip_kw = dict(grad_clip=clip[1], grad_clip_mode=clip[0]) if clip else {}
     fast = langevin_chain(critics, obs, mean, log_std, steps=steps, step_size=eta,
                           temperature=temperature, nu=nu, start=start, noise=noise, **bounds, **clip_kw)
-    a0 = mean.detach() + log_std.detach().exp() * noise[0] if start == "informative" else noise[0]
+    a0 = mean.detach() + log_std.detach().exp() * noise[0] if start == INFORMATIVE else noise[0]
     slow = naive_langevin_chain(critics, actor, obs, a0, steps=steps, step_size=eta,
                                 temperature=temperature, nu=nu, logp_weight=1.0,
                                 noise=noise[1:], **bounds, **clip_kw)
@@ -144,7 +144,7 @@ def test_clamps_to_bounds_after_every_step():
     assert (a == high).any() and (a == low).any()  # big steps do hit both walls
 
 
-@pytest.mark.parametrize("start", ["informative", "noninformative"])
+@pytest.mark.parametrize("start", STARTS)
 def test_start_distribution(start):
     """With a negligible step, ã_T ≈ ã₀: informative ~ N(μ, σ²), non-informative ~ N(0, I)."""
     critics, _, _ = _nets()
@@ -155,7 +155,7 @@ def test_start_distribution(start):
     res = langevin_chain(critics, obs, mean, log_std, steps=1, step_size=1e-12, temperature=1e6,
                          nu=0.0, logp_weight=0.0, start=start,
                          generator=torch.Generator().manual_seed(0))
-    exp_mean, exp_std = (2.0, 0.3) if start == "informative" else (0.0, 1.0)
+    exp_mean, exp_std = (2.0, 0.3) if start == INFORMATIVE else (0.0, 1.0)
     tol = 5 * exp_std / math.sqrt(n)
     assert (res.action.mean(0) - exp_mean).abs().max() < tol
     assert (res.action.std(0) - exp_std).abs().max() < 0.03 * exp_std

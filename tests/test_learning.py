@@ -9,12 +9,13 @@ ends at return −0.9, cost 0, ν peaking at 5.5.
 
 import numpy as np
 import pytest
-
 from conftest import tiny_config
+
+from lac_rllib.algorithm import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU
 from lac_rllib.tasks.point_hazard import PointHazardEnv
 
 # One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
-pytestmark = pytest.mark.xdist_group("learning")
+pytestmark = [pytest.mark.xdist_group("learning"), pytest.mark.slow]
 
 STEPS, TAIL = 45_000, 5  # judge the last TAIL iterations, not one noisy one
 
@@ -23,14 +24,14 @@ def _run(**overrides):
     algo = tiny_config(seed=0, total_env_steps=STEPS, **overrides).build_algo()
     history = []
     try:
-        while not history or history[-1]["env_steps"] < STEPS:
+        while not history or history[-1][ENV_STEPS] < STEPS:
             r = algo.train()
-            history.append({k: float(r[k]) for k in ("episode_return", "episode_cost", "nu", "env_steps")})
+            history.append({k: float(r[k]) for k in (EPISODE_RETURN, EPISODE_COST, NU, ENV_STEPS)})
     finally:
         algo.stop()
     tail = history[-TAIL:]
-    return (np.mean([h["episode_return"] for h in tail]), np.mean([h["episode_cost"] for h in tail]),
-            max(h["nu"] for h in history))
+    return (np.mean([h[EPISODE_RETURN] for h in tail]), np.mean([h[EPISODE_COST] for h in tail]),
+            max(h[NU] for h in history))
 
 
 def _random_policy_return(episodes=30, seed=0):

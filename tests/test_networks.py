@@ -7,8 +7,15 @@ import pytest
 import torch
 from torch import nn
 
-from lac_rllib.networks import (CriticEnsemble, GaussianActor, gaussian_kl, gaussian_log_prob,
-                                mlp)
+from lac_rllib.networks import (
+    CriticEnsemble,
+    GaussianActor,
+    cost_rows,
+    gaussian_kl,
+    gaussian_log_prob,
+    mlp,
+    reward_rows,
+)
 
 OBS, ACT, HID = 5, 3, (16, 12, 8)
 D64 = torch.float64
@@ -69,6 +76,9 @@ def test_forward_equals_independent_mlps(activation):
         torch.testing.assert_close(q[e], _member_as_sequential(ens, e)(x).squeeze(-1))
     torch.testing.assert_close(ens.q_reward(obs, act), q[:2])
     torch.testing.assert_close(ens.q_cost(obs, act), q[2:])
+    # The named rows are views of q (no copy): [:n_reward] reward critics, [n_reward:] cost critics.
+    assert reward_rows(q, 2).data_ptr() == q.data_ptr() and torch.equal(reward_rows(q, 2), q[:2])
+    assert cost_rows(q, 2).data_ptr() == q[2:].data_ptr() and torch.equal(cost_rows(q, 2), q[2:])
 
 
 def test_projection_then_q_equals_forward():

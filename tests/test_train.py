@@ -6,7 +6,9 @@ import sys
 
 import pytest
 
-from lac_rllib.train import CONFIG, PROGRESS, build_config, check_output, run_config, train
+from lac_rllib.config import build_config
+from lac_rllib.learner import LANGEVIN_AT_BOUND
+from lac_rllib.train import CONFIG, PROGRESS, check_output, run_config, train
 
 TINY = ["--set", "env_steps_per_iteration=500", "--set", "replay_capacity=2000", "--set", "random_iterations=1"]
 
@@ -16,6 +18,7 @@ def _lac_train(*args, cwd):
                           cwd=cwd, capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow
 def test_lac_train_command_runs_and_refuses_to_mix_runs(tmp_path):
     out = tmp_path / "run"
     proc = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, cwd=tmp_path)
@@ -24,7 +27,7 @@ def test_lac_train_command_runs_and_refuses_to_mix_runs(tmp_path):
     assert summary["env_steps"] == 1000 and summary["iterations"] == 2 and summary["task"] == "lac/PointHazard-v0"
     assert (out / "checkpoint" / "rllib_checkpoint.json").exists()
     rows = [json.loads(line) for line in (out / PROGRESS).read_text().splitlines()]
-    assert [r["iteration"] for r in rows] == [1, 2] and "langevin_at_bound" in rows[-1]
+    assert [r["iteration"] for r in rows] == [1, 2] and LANGEVIN_AT_BOUND in rows[-1]
     # The same output again without --resume: refused before Ray starts, nothing appended.
     again = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, cwd=tmp_path)
     assert again.returncode == 2 and "pass --resume" in again.stderr
@@ -40,6 +43,7 @@ class _Stop(Exception):
     pass
 
 
+@pytest.mark.slow
 def test_a_stopped_run_resumes_from_its_last_checkpoint(ray_session, tmp_path):
     out = str(tmp_path / "run")
     config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,

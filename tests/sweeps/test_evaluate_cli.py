@@ -15,7 +15,7 @@ from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import CHECKPOINT_TAG, SWEEP_TAG
 
 # One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
-pytestmark = pytest.mark.xdist_group("evaluate_cli")
+pytestmark = [pytest.mark.xdist_group("evaluate_cli"), pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "sweeps" / "evaluate.py"

@@ -28,7 +28,8 @@ _ANT_TRAJECTORY = textwrap.dedent(
     h.update(obs.tobytes())
     for _ in range(300):
         obs, rew, term, trunc, info = env.step(env.action_space.sample())
-        h.update(obs.tobytes()); h.update(np.float64(rew).tobytes()); h.update(bytes([term, trunc]))
+        for part in (obs.tobytes(), np.float64(rew).tobytes(), bytes([term, trunc])):
+            h.update(part)
         if term or trunc:
             obs, _ = env.reset()
             h.update(obs.tobytes())
@@ -155,7 +156,8 @@ def _run_inline() -> str:
     h.update(obs.tobytes())
     for _ in range(300):
         obs, rew, term, trunc, _ = env.step(env.action_space.sample())
-        h.update(obs.tobytes()); h.update(np.float64(rew).tobytes()); h.update(bytes([term, trunc]))
+        for part in (obs.tobytes(), np.float64(rew).tobytes(), bytes([term, trunc])):
+            h.update(part)
         if term or trunc:
             obs, _ = env.reset()
             h.update(obs.tobytes())

@@ -13,12 +13,15 @@ and report the episode cost per the task's convention (sum or Σ 0.99^t c_t).
 
 import numpy as np
 import pytest
+from conftest import tiny_config, train_batch
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
-from conftest import tiny_config, train_batch
 from lac_rllib.connectors import COSTS
+from lac_rllib.learner import ACTOR_LOSS, CRITIC_LOSS, NU, Q_COST_MEAN, Q_REWARD_MEAN
 from lac_rllib.tasks import get_task
+
+pytestmark = pytest.mark.slow  # trains on every task family
 
 SMALL = dict(
     actor_hidden=(32, 32), critic_hidden=(32, 32), langevin_steps=2, lac_minibatch_size=128,
@@ -82,9 +85,9 @@ def _replay(task_id, env_config, seed, episodes):
 
 def _assert_finite_learner_metrics(result):
     learner = result["learners"][DEFAULT_MODULE_ID]
-    for key in ("critic_loss", "actor_loss", "q_reward_mean", "q_cost_mean", "nu"):
+    for key in (CRITIC_LOSS, ACTOR_LOSS, Q_REWARD_MEAN, Q_COST_MEAN, NU):
         assert np.isfinite(learner[key]), f"{key} = {learner[key]}"
-    assert np.isfinite(result["nu"]) and result["nu"] >= 0
+    assert np.isfinite(result[NU]) and result[NU] >= 0
 
 
 @pytest.mark.parametrize("task_id", list(NAV_SEEDS))
@@ -133,7 +136,8 @@ def test_navigation_costs_reach_the_train_batch_row_by_row(ray_session, task_id)
     # Reported episode cost (plain sum) = mean over the episodes that completed in an iteration.
     ends = np.cumsum([len(e) for e in episodes])
     for k, result in enumerate(results):
-        done = [i for i, e in enumerate(episodes) if e.is_done and k * NAV_ITER_STEPS < ends[i] <= (k + 1) * NAV_ITER_STEPS]
+        lo, hi = k * NAV_ITER_STEPS, (k + 1) * NAV_ITER_STEPS
+        done = [i for i, e in enumerate(episodes) if e.is_done and lo < ends[i] <= hi]
         assert result["episodes_this_iter"] == len(done) == 1
         assert result["episode_cost"] == pytest.approx(np.mean([sum(episode_costs[i]) for i in done]))
         assert result["cost_limit"] == 25.0
