@@ -10,6 +10,7 @@ includes actor start-up, Tune's checkpoint every iteration and the MLflow loggin
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import tempfile
@@ -29,8 +30,10 @@ def main() -> None:
 
     import ray
 
-    from lac_rllib.train import build_config, train
-    from sweeps import run as cli, spaces
+    from lac_rllib.config import build_config
+    from lac_rllib.train import train
+    from sweeps import run as cli
+    from sweeps import spaces
     from sweeps.sweep import run_sweep
 
     tmp = Path(tempfile.mkdtemp(prefix="tune_overhead_"))
@@ -38,23 +41,24 @@ def main() -> None:
                            "--tracking-uri", f"sqlite:///{tmp / 'mlflow.db'}", "--storage", str(tmp / "ray_results"),
                            "--experiment", "overhead", *(["--task", a.task] if a.task else [])])
     plan = cli.make_plan(args)
-    plan["trials"] = plan["trials"][: a.trials]
-    plan["n_trials"], plan["concurrency"] = len(plan["trials"]), 1
+    plan = dataclasses.replace(plan, trials=plan.trials[: a.trials], n_trials=min(a.trials, plan.n_trials),
+                               concurrency=1)
     budget = spaces.BUDGETS[a.budget]
     ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False, logging_level="ERROR")
 
     start = time.perf_counter()
-    for t in plan["trials"]:
-        config = build_config(t.task, t.seed, {**budget.overrides, **t.overrides}, timesteps=budget.timesteps)
-        train(config, budget.timesteps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
+    for t in plan.trials:
+        steps, overrides = budget.for_task(t.task)
+        config = build_config(t.task, t.seed, {**overrides, **t.overrides}, timesteps=steps)
+        train(config, steps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
     direct = time.perf_counter() - start
 
     start = time.perf_counter()
-    run_sweep(plan, args, Path(plan["storage"]) / plan["name"], "benchmark")
+    run_sweep(plan, args, Path(plan.storage) / plan.name, "benchmark")
     tuned = time.perf_counter() - start
 
-    n = len(plan["trials"])
-    print(f"\n{n} trials of {a.space}/{a.budget} ({budget.timesteps} env steps each), one at a time:")
+    n = len(plan.trials)
+    print(f"\n{n} trials of {a.space}/{a.budget} ({plan.timesteps} env steps each), one at a time:")
     print(f"  back to back in one process: {direct:7.1f} s  ({direct / n:.1f} s/trial)")
     print(f"  through Tune + MLflow:       {tuned:7.1f} s  ({tuned / n:.1f} s/trial)")
     print(f"  Tune's overhead per trial:   {(tuned - direct) / n:7.1f} s  (ratio {tuned / direct:.2f}x)")

@@ -13,7 +13,7 @@ run when it logged them (tag ``lac.checkpoint_sha256``) before anything is unpic
 missing manifest or a mismatch stops with one line naming the file.
 
 Episode i is reset with seed S+i; equal seeds give identical results. ``generator`` acts with
-the actor's mean; ``langevin`` refines each action with Algorithm 1 (SPEC §1) started from the
+the actor's mean; ``langevin`` refines each action with Algorithm 1 (docs/spec.md §1) started from the
 target actor, with noise seeded from the seed. Prints return, cost, cost limit and the fraction
 of episodes within the limit (mean ± std over episodes); ``--json`` adds one JSON object as the
 last stdout line. Restoring needs no Ray cluster (nothing calls ray.init).
@@ -33,10 +33,10 @@ lac-rllib version) or an MLflow run without a checkpoint; each error is one line
 from __future__ import annotations
 
 import argparse
-import os
 import dataclasses
 import json
 import math
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -237,7 +237,8 @@ def format_human(result: dict, source: str) -> str:
     convention = "summed" if gamma == 1.0 else f"discounted with {gamma:g}"
     lines = [
         f"{source}",
-        f"task {result['task']}  actions {result['actions']}  episodes {n}  seeds {result['seed']}..{result['seed'] + n - 1}",
+        f"task {result['task']}  actions {result['actions']}  episodes {n}  "
+        f"seeds {result['seed']}..{result['seed'] + n - 1}",
         f"return         {_pm(result['return_mean'], result['return_std'])}",
         f"cost           {_pm(result['cost_mean'], result['cost_std'])}  ({convention} per episode)",
         f"cost limit     {result['cost_limit']:g}",

@@ -2,7 +2,7 @@
 
 Turns the per-trial table and per-iteration curves into a per-configuration summary (CSV,
 markdown, best feasible configuration as JSON) and the plots of the paper's ablations
-(SPEC §7: box plots of the final cost per swept value, Figs. 4/6/7; mean learning curves).
+(docs/spec.md §7: box plots of the final cost per swept value, Figs. 4/6/7; mean learning curves).
 
 Conventions:
 - A configuration is (group, param, value, task); its rows are its seeds.
@@ -27,9 +27,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-KEYS = ["group", "param", "value", "task"]
+from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
+
+KEYS = ["group", "param", "value", "task", "config"]
 STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
-         "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean"]
+         "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean", "is_default",
+         *STAT_COLUMNS]
 
 
 def _is_na(v) -> bool:
@@ -66,6 +69,10 @@ def _prepared(trials: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
     """Copy of ``trials`` with a clean ``param`` column, and the boolean mask of failed trials."""
     df = trials.copy()
     df["param"] = df["param"].fillna("").astype(str)
+    # "config": the configuration without its seed (lac.config; a search's samples share group,
+    # param and value); "default": the trial runs LAC's defaults, the baseline of the comparisons.
+    df["config"] = df["config"].fillna("").astype(str) if "config" in df else ""
+    df["default"] = df["default"].fillna(False).astype(bool) if "default" in df else False
     failed = df["status"].astype(str).eq("ERROR")
     for col in ("episode_return", "episode_cost"):
         failed |= pd.to_numeric(df[col], errors="coerce").isna()
@@ -77,10 +84,12 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
     df, failed = _prepared(trials)
     rows = []
     stopped = df["status"].astype(str).eq("STOPPED") & ~failed  # ASHA: a score at an earlier budget
+    scored = df[~(failed | stopped)]
     for key, g in df.groupby(KEYS, dropna=False, sort=False):
         ok = g[~(failed | stopped).loc[g.index]]
         ret, cost = (pd.to_numeric(ok[c], errors="coerce") for c in ("episode_return", "episode_cost"))
         limit = pd.to_numeric(g["cost_limit"], errors="coerce").median()
+        base = scored[scored["default"] & (scored["task"] == g["task"].iloc[0])]
         rows.append(dict(
             zip(KEYS, key), n_seeds=len(ok), n_failed=int(failed.loc[g.index].sum()),
             n_stopped=int(stopped.loc[g.index].sum()),
@@ -88,7 +97,10 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
             cost_mean=cost.mean(), cost_std=cost.std(ddof=1), cost_limit=limit,
             feasible_fraction=pd.to_numeric(ok["feasible"], errors="coerce").mean(),
             mean_feasible=bool(cost.mean() <= limit),  # False when either side is NaN
-            objective_mean=pd.to_numeric(ok["objective"], errors="coerce").mean()))
+            objective_mean=pd.to_numeric(ok["objective"], errors="coerce").mean(),
+            is_default=bool(g["default"].any()),
+            **seed_statistics(ret, cost, *(pd.to_numeric(base[c], errors="coerce") for c in
+                                           ("episode_return", "episode_cost")) if len(base) else (None, None))))
     rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"]))
     return pd.DataFrame(rows, columns=KEYS + STATS)
 
@@ -110,27 +122,88 @@ def _describe(cfg: dict) -> str:
             f"{cfg['n_seeds']} seeds")
 
 
+def _ci(point, lo, hi) -> str:
+    """"2.19 [1.10, 3.05]"; the interval shows "–" when undefined (fewer than 2 seeds)."""
+    if _is_na(point):
+        return "–"
+    return f"{_fmt_num(point)} [{_fmt_num(lo)}, {_fmt_num(hi)}]" if not _is_na(lo) else f"{_fmt_num(point)} [–]"
+
+
+def _poi(x) -> str:
+    return "–" if _is_na(x) else f"{float(x):.2f}"
+
+
+def _what(r: dict) -> str:
+    what = f"{r['param']}={_fmt_value(r['value'])}" if r["param"] else (r.get("config") or "–")
+    return what + (" (default)" if r.get("is_default") else "")
+
+
+def _feasible(r: dict) -> str:
+    if not r["n_seeds"]:
+        return "no (all failed)"
+    n_ok = "–" if _is_na(r["feasible_fraction"]) else round(r["feasible_fraction"] * r["n_seeds"])
+    return f"{n_ok}/{r['n_seeds']}"
+
+
+STAT_HEADER = ("return mean [95% CI] | return IQM [95% CI] | cost mean [95% CI] | cost IQM [95% CI] "
+               "| feasible seeds | P(return > default) | P(cost < default)")
+
+
+def _stat_cells(r: dict) -> list[str]:
+    return [_ci(r["return_mean"], r["return_mean_ci_low"], r["return_mean_ci_high"]),
+            _ci(r["return_iqm"], r["return_iqm_ci_low"], r["return_iqm_ci_high"]),
+            _ci(r["cost_mean"], r["cost_mean_ci_low"], r["cost_mean_ci_high"]),
+            _ci(r["cost_iqm"], r["cost_iqm_ci_low"], r["cost_iqm_ci_high"]),
+            _feasible(r), _poi(r["poi_return_vs_default"]), _poi(r["poi_cost_vs_default"])]
+
+
+def _seeds(r: dict) -> str:
+    return (f"{r['n_seeds']}" + (f" (+{r['n_failed']} failed)" if r["n_failed"] else "")
+            + (f" (+{r['n_stopped']} stopped early)" if r["n_stopped"] else ""))
+
+
 def markdown_table(summary: pd.DataFrame) -> str:
-    """Markdown table of the summary (one row per configuration) plus a best-configuration line."""
+    """Markdown table of the summary (one row per configuration), the seeds line and the best one."""
     def cell(x) -> str:
         return str(x).replace("|", "\\|")
 
-    lines = ["| group | swept | value | task | seeds | return (mean ± std) | cost (mean ± std) "
-             "| limit | feasible |", "|---|---|---|---|---:|---:|---:|---:|---|"]
+    lines = [f"| group | configuration | task | seeds | {STAT_HEADER} | return (mean ± std) | cost (mean ± std) "
+             "| limit |", "|---|---|---|---:|" + "---:|" * 7 + "---:|---:|---:|"]
     for r in summary.to_dict("records"):
-        seeds = (f"{r['n_seeds']}" + (f" (+{r['n_failed']} failed)" if r["n_failed"] else "")
-                 + (f" (+{r['n_stopped']} stopped early)" if r["n_stopped"] else ""))
-        n_ok = "–" if _is_na(r["feasible_fraction"]) else round(r["feasible_fraction"] * r["n_seeds"])
-        feas = f"{'yes' if r['mean_feasible'] else 'no'} ({n_ok}/{r['n_seeds']} seeds)"
-        cols = [r["group"], r["param"] or "–", _fmt_value(r["value"]), r["task"], seeds,
-                _pm(r["return_mean"], r["return_std"]), _pm(r["cost_mean"], r["cost_std"]),
-                _fmt_num(r["cost_limit"]), feas if r["n_seeds"] else "no (all failed)"]
+        cols = [r["group"], _what(r), r["task"], _seeds(r), *_stat_cells(r),
+                _pm(r["return_mean"], r["return_std"]), _pm(r["cost_mean"], r["cost_std"]), _fmt_num(r["cost_limit"])]
         lines.append("| " + " | ".join(cell(c) for c in cols) + " |")
     best = best_configuration(summary)
-    lines.append("")
+    lines += ["", seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
     lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
                  "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)")
     return "\n".join(lines) + "\n"
+
+
+def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: int = 7900) -> str:
+    """The parent run's note: what the sweep found, readable on its MLflow page.
+
+    MLflow cuts a tag at 8000 characters, so rows beyond ``limit`` are left to summary.md.
+    """
+    tasks = summary["task"].astype(str).unique() if len(summary) else []
+    one_task = len(tasks) == 1
+    best = best_configuration(summary)
+    head = [heading, "", (f"**Best feasible configuration:** {_describe(best)}" if best else
+                          "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)"), ""]
+    if one_task:
+        head += [f"Task `{tasks[0]}`; final return and cost per configuration over its seeds:", ""]
+    head += [seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
+    cols = "| group | configuration | " + ("" if one_task else "task | ") + "seeds | " + STAT_HEADER + " |"
+    rows = [cols, "|" + "---|" * (cols.count("|") - 1)]
+    for r in summary.to_dict("records"):
+        cells = [r["group"], _what(r)] + ([] if one_task else [r["task"]]) + [_seeds(r), *_stat_cells(r)]
+        rows.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
+    tail = ["", footer] if footer else []
+    text = "\n".join(head + rows + tail)
+    while len(text) > limit and len(rows) > 2:  # keep the head and the footer, drop rows from the end
+        rows.pop()
+        text = "\n".join(head + rows + ["", f"… {len(summary) - len(rows) + 2} more rows in summary/summary.md"] + tail)
+    return text
 
 
 def _panels(trials: pd.DataFrame, swept_only: bool) -> list[tuple[str, str, pd.DataFrame]]:
@@ -200,6 +273,34 @@ def cost_box_plots(trials: pd.DataFrame, path) -> str | None:
         ax.set(title=f"{label}: final cost per {param}", xlabel=param, ylabel="final episode cost")
     for ax in axes.ravel()[len(panels):]:
         ax.set_visible(False)
+    return _save(fig, path)
+
+
+def aggregate_plots(summary: pd.DataFrame, path) -> str | None:
+    """Per configuration: mean and IQM of the final return and cost with their 95% intervals (the
+    statistics of summary.md), one row per group; the cost limit dashed, the default marked."""
+    df = summary[summary["n_seeds"] > 0]
+    if df.empty:
+        return None
+    groups = list(dict.fromkeys(df["group"].astype(str)))
+    fig, axes = plt.subplots(len(groups), 2, figsize=(12, 3.4 * len(groups)), squeeze=False)
+    for (ax_r, ax_c), group in zip(axes, groups):
+        g = df[df["group"].astype(str) == group].reset_index(drop=True)
+        labels = [_what(r) for r in g.to_dict("records")]
+        x = np.arange(len(g))
+        for ax, name in ((ax_r, "return"), (ax_c, "cost")):
+            for dx, agg, marker in ((-0.12, "mean", "o"), (0.12, "iqm", "s")):
+                point = g[f"{name}_{agg}"].to_numpy(float)
+                lo, hi = g[f"{name}_{agg}_ci_low"].to_numpy(float), g[f"{name}_{agg}_ci_high"].to_numpy(float)
+                err = np.vstack([np.where(np.isnan(lo), 0, point - lo), np.where(np.isnan(hi), 0, hi - point)])
+                ax.errorbar(x + dx, point, yerr=err, fmt=marker, capsize=4, label=f"{agg} [95% CI]")
+            ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
+            ax.set(title=f"{group}: final {name} per configuration", ylabel=f"final episode {name}")
+        limit = _limit(g["cost_limit"])
+        if not math.isnan(limit):
+            ax_c.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
+        ax_r.legend(fontsize=8, loc="best")
+        ax_c.legend(fontsize=8, loc="best")
     return _save(fig, path)
 
 
@@ -294,6 +395,7 @@ def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir) -> dict[str
     trials.to_csv(out / "trials.csv", index=False)
     paths = {n: str(out / n) for n in ("summary.csv", "summary.md", "best.json", "trials.csv")}
     for name, made in (("cost_boxplots.png", cost_box_plots(trials, out / "cost_boxplots.png")),
+                       ("aggregates.png", aggregate_plots(summary, out / "aggregates.png")),
                        ("learning_curves.png", learning_curves(trials, curves, out / "learning_curves.png"))):
         if made:
             paths[name] = made

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
+import logging
 import os
 import socket
 import subprocess
@@ -20,11 +20,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `python sweeps/r
 
 from sweeps import spaces  # noqa: E402
 from sweeps.lock import DriverLock, SweepLocked  # noqa: E402
+from sweeps.plan import Plan  # noqa: E402
 from sweeps.record import SWEEP_FILE, resume_differences  # noqa: E402
 from sweeps.tracking import check_reachable, default_tracking_uri  # noqa: E402
 
-# Rough env steps per second of one trial (sampling + learning, 1 CPU) for the plan's estimate.
-RATE = {"tiny": 700.0, "safety_gym": 250.0, "mujoco": 500.0}
+# The plan's estimate, per preset: env steps per second of one trial on 1 CPU without the chain,
+# and chain seconds per env step and per Langevin step (calibration: docs/sweeps.md).
+RATE = {"tiny": 317.0, "safety_gym": 377.0, "mujoco": 185.0}
+CHAIN_S_PER_STEP = {"tiny": 5.3e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
 STARTUP_S = 15.0
 
 
@@ -32,16 +35,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="sweeps/run.py", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--space", required=True, choices=spaces.SPACES, help="which search space")
-    p.add_argument("--task", default=None, help=f"task id (default {spaces.DEFAULT_TASK}; smoke: {spaces.SMOKE_TASK}; paper: all paper tasks)")
+    p.add_argument("--task", default=None, help=f"task id (default {spaces.DEFAULT_TASK}; smoke: {spaces.SMOKE_TASK}; "
+                                                 "paper: all paper tasks)")
     p.add_argument("--budget", default="quick", choices=list(spaces.BUDGETS),
-                   help="; ".join(f"{k}: {b.timesteps} steps, {b.doc}" for k, b in spaces.BUDGETS.items()))
-    p.add_argument("--seeds", type=int, default=3, help="seeds per configuration (grid spaces)")
-    p.add_argument("--num-samples", type=int, default=20, help="Optuna samples (search space)")
+                   help="; ".join(f"{k}: {b.describe()}" for k, b in spaces.BUDGETS.items()))
+    p.add_argument("--seeds", type=int, default=3, help="seeds per configuration (search: per Optuna sample)")
+    p.add_argument("--num-samples", type=int, default=20, help="Optuna samples, i.e. configurations (search space)")
     p.add_argument("--max-concurrent", type=int, default=None, help="trials at once (default: CPUs / cpus-per-trial)")
     p.add_argument("--cpus-per-trial", type=int, default=1, help="CPUs (and torch threads) per trial")
     p.add_argument("--scheduler", choices=("none", "asha"), default="none")
     p.add_argument("--address", default=None, help="Ray cluster address (host:port or auto); default: local Ray")
-    p.add_argument("--tracking-uri", default=None, help="MLflow tracking URI (default: sqlite store in the working dir)")
+    p.add_argument("--tracking-uri", default=None,
+                   help="MLflow tracking URI (default: sqlite store in the working dir)")
     p.add_argument("--experiment", default="lac-sweeps", help="MLflow experiment name")
     p.add_argument("--storage", default="ray_results",
                    help="Tune storage path (on a cluster: an absolute path every node mounts)")
@@ -49,6 +54,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--resume", action="store_true", help="continue the sweep of the same name")
     p.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial (node loss)")
     p.add_argument("--optuna-seed", type=int, default=0, help="seed of the TPE sampler")
+    p.add_argument("--optuna-storage", default=None,
+                   help="Optuna storage URL of the search space's study (default: optuna.db beside a local MLflow "
+                        "store, else in --storage); open it with optuna-dashboard URL")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a LAC field in every trial (the swept value wins); e.g. nu_max_adaptive=False")
     return p.parse_args(argv)
@@ -102,7 +110,7 @@ def check_shared(uri: str, storage: str) -> None:
                          "node; accepted: an absolute path every node mounts at the same place")
 
 
-def make_plan(args) -> dict:
+def make_plan(args) -> Plan:
     spaces.validate(args.space, args.task, args.budget, args.seeds)
     for flag in ("num_samples", "cpus_per_trial", "max_concurrent"):
         v = getattr(args, flag)
@@ -126,36 +134,97 @@ def make_plan(args) -> dict:
     check_reachable(uri)
     task = spaces.default_task(args.space, args.task)
     budget = spaces.BUDGETS[args.budget]
-    trials = spaces.grid(args.space, task, args.seeds) if args.space != "search" else None
-    n_trials = len(trials) if trials is not None else args.num_samples
-    concurrency = args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial)
-    presets = {_preset(t.task) for t in trials} if trials else {_preset(task)}
-    per_trial = STARTUP_S + budget.timesteps / min(RATE[p] for p in presets) / args.cpus_per_trial ** 0.5
+    trials = (spaces.mark_defaults(spaces.grid(args.space, task, args.seeds, args.budget), args.budget, sets)
+              if args.space != "search" else None)
+    # search: each Optuna sample is trained with every seed (sweeps/sweep.py, SeedRepeater)
+    n_trials = len(trials) if trials is not None else args.num_samples * args.seeds
+    concurrency = min(args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial), n_trials)
+    per_trial = ([estimate_trial_s(budget, t.task, t.overrides, args.cpus_per_trial) for t in trials] if trials
+                 else [estimate_trial_s(budget, task, {}, args.cpus_per_trial)] * n_trials)
+    (timesteps,) = {budget.for_task(t.task)[0] for t in trials} if trials else {budget.for_task(task)[0]}
     name = args.name or f"{args.space}-{(task or 'paper').split('/')[-1]}-{args.budget}"
-    return {
-        "space": args.space, "task": task, "budget": args.budget, "timesteps": budget.timesteps,
-        "trials": trials, "n_trials": n_trials, "concurrency": min(concurrency, n_trials), "sets": sets,
-        "estimated_wall_s": per_trial * math.ceil(n_trials / min(concurrency, n_trials)),
-        "tracking_uri": uri, "experiment": args.experiment, "name": name,
-        "storage": str(Path(args.storage.removeprefix("file://")).resolve()),
-    }
+    optuna_storage = None
+    if args.space == "search":
+        optuna_storage = args.optuna_storage or default_optuna_storage(uri, args.storage)
+        check_optuna_study(optuna_storage, name, args.resume)
+    return Plan(
+        space=args.space, task=task, budget=args.budget, timesteps=timesteps, trials=trials, n_trials=n_trials,
+        concurrency=concurrency, sets=sets, estimated_wall_s=estimate_wall_s(per_trial, concurrency),
+        estimated_cpu_h=sum(per_trial) * args.cpus_per_trial / 3600, tracking_uri=uri, experiment=args.experiment,
+        name=name, storage=str(Path(args.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
+    )
 
 
-def _preset(task: str) -> str:
+def default_optuna_storage(tracking_uri: str, storage: str) -> str:
+    """``optuna.db`` beside a local MLflow store (sqlite), else in the Tune storage directory.
+
+    Only the driver writes it (Tune's searcher runs there), so a file is enough on a cluster too.
+    """
+    if tracking_uri.startswith("sqlite:///"):
+        folder = Path(tracking_uri[len("sqlite:///"):]).parent
+    else:
+        folder = Path(storage.removeprefix("file://")).resolve()
+    return f"sqlite:///{folder / 'optuna.db'}"
+
+
+def check_optuna_study(url: str, name: str, resume: bool) -> None:
+    """A fresh search must not adopt a study left by another sweep of the same name."""
+    if not url.startswith(("sqlite:///", "postgresql", "mysql")):
+        raise ValueError(f"--optuna-storage {url!r}: accepted: an SQLAlchemy URL (sqlite:///PATH.db, postgresql://…, "
+                         "mysql://…)")
+    if resume or (url.startswith("sqlite:///") and not Path(url[len("sqlite:///"):]).exists()):
+        return
+    import optuna
+
+    try:
+        studies = {s.study_name for s in optuna.get_all_study_summaries(url)}
+    except Exception as e:  # noqa: BLE001 - any failure means the storage is unusable
+        raise ValueError(f"--optuna-storage {url}: cannot be opened ({e})") from None
+    if name in studies:
+        raise ValueError(f"an Optuna study named {name!r} exists in {url}; pass --resume, another --name, or "
+                         f"delete it (optuna delete-study --storage {url} --study-name {name})")
+
+
+def estimate_trial_s(budget, task: str, overrides: dict, cpus: int) -> float:
+    """Rough wall seconds of one trial: start-up, then env steps at the preset's measured rate,
+    plus the chain's share, which grows with T (measured on this project's 2-core machine)."""
+    from lac_rllib.config import PRESETS, LACParams
     from lac_rllib.tasks import get_task
 
-    return get_task(task).preset
+    preset = get_task(task).preset
+    steps, budget_overrides = budget.for_preset(preset)
+    fields = {**LACParams().__dict__, **PRESETS.get(preset, {}), **budget_overrides, **overrides}
+    chain = CHAIN_S_PER_STEP.get(preset, 0.0) * fields["langevin_steps"] * steps
+    return STARTUP_S + (steps / RATE[preset] + chain) / cpus ** 0.5
 
 
-def print_plan(plan: dict, args) -> None:
-    print(f"LAC sweep '{plan['name']}': space={plan['space']} task={plan['task'] or 'all paper tasks'} budget={plan['budget']}")
-    print(f"  trials: {plan['n_trials']}  ({'Optuna TPE samples' if plan['trials'] is None else f'{args.seeds} seed(s) per configuration'})")
-    print(f"  env steps per trial: {plan['timesteps']:,}   concurrency: {plan['concurrency']} x {args.cpus_per_trial} CPU"
+def estimate_wall_s(per_trial: list[float], concurrency: int) -> float:
+    """Trials taken longest first onto ``concurrency`` slots (Tune starts them in grid order, so
+    this is a floor when the longest come last)."""
+    slots = [0.0] * concurrency
+    for t in sorted(per_trial, reverse=True):
+        slots[slots.index(min(slots))] += t
+    return max(slots)
+
+
+def print_plan(plan: Plan, args) -> None:
+    print(f"LAC sweep '{plan.name}': space={plan.space} task={plan.task or 'all paper tasks'} "
+          f"budget={plan.budget}")
+    what = f"{args.num_samples} Optuna TPE samples x " if plan.trials is None else ""
+    print(f"  trials: {plan.n_trials}  ({what}{args.seeds} seed(s) per configuration)")
+    print(f"  env steps per trial: {plan.timesteps:,}   "
+          f"concurrency: {plan.concurrency} x {args.cpus_per_trial} CPU"
           f"{'' if not args.address else ' (cluster: capped by its CPUs)'}")
-    print(f"  estimated wall time: ~{plan['estimated_wall_s'] / 60:.0f} min (rough)")
-    print(f"  MLflow: {plan['tracking_uri']}  experiment '{plan['experiment']}'")
-    print(f"  Tune results: {plan['storage']}/{plan['name']}{'  (resuming)' if args.resume else ''}")
-    print(f"  browse: mlflow ui --backend-store-uri {plan['tracking_uri']}", flush=True)
+    print(f"  estimated wall time: ~{plan.estimated_wall_s / 60:.0f} min, "
+          f"{plan.estimated_cpu_h:.1f} CPU-hours (rough)")
+    if plan.estimated_wall_s > 4 * 3600 and not args.address:
+        print("  too long for one machine? the same command runs on a Ray cluster: --address HEAD:PORT "
+              "(set-up: docker/README.md)")
+    print(f"  MLflow: {plan.tracking_uri}  experiment '{plan.experiment}'")
+    print(f"  Tune results: {plan.storage}/{plan.name}{'  (resuming)' if args.resume else ''}")
+    if plan.optuna_storage:
+        print(f"  Optuna study '{plan.name}': {plan.optuna_storage}  (optuna-dashboard {plan.optuna_storage})")
+    print(f"  browse: mlflow ui --backend-store-uri {plan.tracking_uri}", flush=True)
 
 
 def git_commit() -> str:
@@ -168,25 +237,28 @@ def git_commit() -> str:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    # RLlib warns once per process that LAC runs on the new API stack (it is built for it): noise
+    # above the plan. Trials run in other processes, where RLlib's own logging is untouched.
+    logging.getLogger("ray.rllib.algorithms.algorithm_config").setLevel(logging.ERROR)
     try:
         plan = make_plan(args)
-        sweep_dir = Path(plan["storage"]) / plan["name"]
+        sweep_dir = Path(plan.storage) / plan.name
         if args.resume and not (sweep_dir / SWEEP_FILE).exists():
-            raise ValueError(f"--resume: no sweep named {plan['name']!r} under {plan['storage']}")
+            raise ValueError(f"--resume: no sweep named {plan.name!r} under {plan.storage}")
         if args.resume:
             diff = resume_differences(json.loads((sweep_dir / SWEEP_FILE).read_text()), plan, args)
             if diff:
-                raise ValueError(f"--resume: sweep {plan['name']!r} was started with other settings: "
+                raise ValueError(f"--resume: sweep {plan.name!r} was started with other settings: "
                                  f"{'; '.join(diff)}. Resume with the original ones, or start a new --name")
         # A directory without a record or Tune state is a start that failed early: startable.
         started = (sweep_dir / SWEEP_FILE).exists() or any(sweep_dir.glob("experiment_state*.json"))
         if not args.resume and started:
-            raise ValueError(f"a sweep named {plan['name']!r} exists under {plan['storage']}; pass --resume or --name")
+            raise ValueError(f"a sweep named {plan.name!r} exists under {plan.storage}; pass --resume or --name")
     except ValueError as e:
         print(f"sweeps/run.py: error: {e}", file=sys.stderr)
         return 2
     lock = None
-    if "://" not in plan["storage"]:  # object stores have no atomic create (sweeps/lock.py)
+    if "://" not in plan.storage:  # object stores have no atomic create (sweeps/lock.py)
         lock = DriverLock(sweep_dir)
         try:
             lock.acquire()
@@ -194,7 +266,7 @@ def main(argv=None) -> int:
             print(f"sweeps/run.py: error: {e}", file=sys.stderr)
             return 2
     else:
-        print(f"note: no driver lock on {plan['storage']}: do not run this sweep from two drivers at once",
+        print(f"note: no driver lock on {plan.storage}: do not run this sweep from two drivers at once",
               file=sys.stderr)
     try:
         print_plan(plan, args)

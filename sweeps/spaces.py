@@ -15,7 +15,10 @@ PAPER_TASKS = (
     "focops/HumanoidCircle-v0",
 )
 SPACES = ("ablation", "search", "paper", "smoke")
-DEFAULT_TASK = "SafetyPointGoal1-v0"  # the paper's ablation task (Table 3)
+REPEAT_INDEX = "__trial_index__"  # ray.tune.search.repeater.TRIAL_INDEX (not imported: no Ray before the plan)
+DEFAULT_TASK = "lac/PointHazard-v0"  # the default ablation: a task that learns in minutes
+PAPER_ABLATION_TASK = "SafetyPointGoal1-v0"  # the paper's Table 3 (--task ... --budget paper)
+QUICK_TINY_STEPS = 40_000
 SMOKE_TASK = "lac/PointHazard-v0"
 
 # Table 3: NI × T, VT × T, PR × β (the paper's ablations, each × seeds).
@@ -25,34 +28,61 @@ ABLATION = {
     "PR": ("beta", (0.0, 1.0, 5.0, 10.0, 20.0), {}),
 }
 SMOKE = {"smoke": ("langevin_steps", (5, 10), {})}
+# The default ablation's grid (the quick budget on lac/PointHazard-v0): Table 3's three groups at
+# the chain lengths the tiny task's preset (T = 10) is built around. The paper's T up to 500 would
+# cost ~50x a T = 10 trial's chain: 48 trials do not fit the 35 minutes on 2 cores that a first
+# run gets; --task SafetyPointGoal1-v0 --budget paper runs Table 3 itself.
+QUICK_ABLATION = {
+    "NI": ("langevin_steps", (10, 30), {"langevin_start": "noninformative"}),
+    "VT": ("langevin_steps", (10, 20, 30), {}),
+    "PR": ("beta", (5.0, 20.0), {}),
+}
 
 
 @dataclasses.dataclass(frozen=True)
 class Budget:
-    """Env steps per trial, and the LAC overrides that make that budget meaningful."""
+    """Env steps per trial and the LAC overrides that make that budget meaningful, per task preset
+    (``lac_rllib.config.PRESETS``; ``"*"`` for any other preset)."""
 
-    timesteps: int
-    overrides: dict
+    by_preset: dict
     doc: str
+    #: The ablation's groups at this budget, per preset, where they differ from Table 3's ``ABLATION``.
+    ablation_by_preset: dict = dataclasses.field(default_factory=dict)
+
+    def for_preset(self, preset: str) -> tuple[int, dict]:
+        return self.by_preset.get(preset, self.by_preset["*"])
+
+    def for_task(self, task: str) -> tuple[int, dict]:
+        from lac_rllib.tasks import get_task
+
+        return self.for_preset(get_task(task).preset)
+
+    def describe(self) -> str:
+        steps = ", ".join(f"{n:,}" + ("" if p == "*" else f" on {p} tasks") for p, (n, _) in self.by_preset.items())
+        return f"{steps} env steps: {self.doc}"
 
 
+# A trial this short cannot repay a compile of the fused chain (~15-40 s per process): eager.
+_SMOKE = {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
+          "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1, "langevin_fused": False}
 BUDGETS: dict[str, Budget] = {
-    "smoke": Budget(2_000, {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
-                            "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1,
-                            "langevin_fused": False},
-                    "seconds per trial: proves the machinery, learns nothing"),
-    # 64-wide networks: with the paper's 256-wide critics one T = 500 chain costs ~8 s per
-    # gradient step here (benchmarks/langevin.py), which no 30-minute ablation can afford.
-    # At 10k steps the default ablation took 18.4 min here; 16k (~1.8x the sampling and gradient
-    # steps) aims at the middle of the 30-45 min the sweep issue asks for.
-    # One env and the eager chain: 2k-step iterations of 1000-step episodes need a single env to
-    # complete episodes every iteration (10 envs would finish none for 5 iterations), and a
-    # trial this short cannot repay a compile (~15-40 s per process).
-    "quick": Budget(16_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
-                             "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
-                             "num_envs_per_env_runner": 1, "langevin_fused": False},
-                    "sized so the default ablation (48 trials) takes ~30-45 min on 2 cores"),
-    "paper": Budget(2_500_000, {}, "the paper's 2.5M env steps with the SPEC presets"),
+    "smoke": Budget({"*": (2_000, _SMOKE)}, "seconds per trial: proves the machinery, learns nothing"),
+    # The default ablation (python sweeps/run.py --space ablation): on the tiny task, where
+    # QUICK_TINY_STEPS of the tiny preset learn, on a reduced Table 3 grid (QUICK_ABLATION);
+    # calibrated by running it (docs/sweeps.md). The fused chain pays here: a T = 30 trial runs
+    # ~1,400 chains of 30 steps, and the compiled kernels are cached on disk across trials. Ten
+    # envs per runner: RLlib's per-step machinery took 55% of a one-env trial (py-spy); ten
+    # 100-step episodes still complete in every 1,000-step iteration.
+    # On the paper's tasks 16k steps (64-wide nets, one env so 2k-step iterations complete
+    # 1000-step episodes) are a machinery check: the paper's 2.5M cannot be shrunk that far.
+    "quick": Budget({"tiny": (QUICK_TINY_STEPS, {"langevin_fused": True, "num_envs_per_env_runner": 10}),
+                     "*": (16_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
+                                    "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                                    "num_envs_per_env_runner": 1, "langevin_fused": False})},
+                    "the default ablation learns lac/PointHazard-v0 in ~30 min on 2 cores; on the paper's tasks "
+                    "a machinery check that learns nothing",
+                    ablation_by_preset={"tiny": QUICK_ABLATION}),
+    "paper": Budget({"*": (2_500_000, {})}, "the paper's 2.5M env steps with the docs/spec.md §5 presets"),
 }
 
 # Optuna TPE ranges for the search space (T int, η and λ log-uniform, β uniform).
@@ -76,10 +106,65 @@ class TrialSpec:
     overrides: dict
     #: Test hook: the trial raises at this iteration (exercises the failure path end to end).
     fail_at_iteration: int | None = None
+    #: The trial runs LAC's defaults (for its task and budget): the baseline of the report's comparisons.
+    default: bool = False
+    #: A search trial's values as Optuna sampled them (its name); None for grid trials.
+    sampled: dict | None = None
+
+    def config_label(self) -> str:
+        """The configuration without its seed (MLflow's ``lac.config`` tag)."""
+        if self.sampled is not None:
+            return search_label(self.sampled, None)
+        task = self.task.split("/")[-1]
+        return f"{self.group}-{self.param}={self.value}-{task}" if self.param else f"{self.group}-{task}"
 
     def label(self) -> str:
-        task = self.task.split("/")[-1]
-        return f"{self.group}-{self.param}={self.value}-{task}-s{self.seed}" if self.param else f"{self.group}-{task}-s{self.seed}"
+        return f"{self.config_label()}-s{self.seed}"
+
+    def swept(self) -> dict:
+        """What this trial sets on top of the budget's configuration: the grid point, or the sample."""
+        return self.sampled if self.sampled is not None else {self.param: self.value} if self.param else {}
+
+
+def config_id(task: str, timesteps: int, params: dict) -> str:
+    """A stable id of a configuration without its seed: what it learns with (task, budget, every
+    LAC field except the speed-only ones). Equal across seeds, different between configurations."""
+    import hashlib
+    import json
+
+    from lac_rllib.config import SPEED_FIELDS
+
+    what = {"task": task, "timesteps": int(timesteps), **{k: v for k, v in params.items() if k not in SPEED_FIELDS}}
+    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+# Short names of the searched fields in a search trial's label (ASCII: labels name Tune's trials).
+SEARCH_LABEL = {"langevin_steps": "T", "langevin_step_size": "eta", "temperature": "lam", "beta": "beta"}
+
+
+def search_label(overrides: dict, seed: int | None) -> str:
+    """A search trial's label from its sampled values, e.g. ``search-T=37-eta=2.1e-04-lam=3.0e-03-beta=4.2-s0``
+    (without ``-s0`` when ``seed`` is None: the configuration)."""
+    parts = []
+    for name, short in SEARCH_LABEL.items():
+        v = overrides.get(name)
+        if v is not None:
+            kind = SEARCH_RANGES[name][0]
+            fmt = {"int": "d", "log": ".1e"}.get(kind, ".1f")
+            parts.append(f"{short}={v:{fmt}}")
+    return "-".join(["search", *parts, *([] if seed is None else [f"s{seed}"])])
+
+
+def trial_spec(config: dict) -> TrialSpec:
+    """A Tune trial's config as the TrialSpec it runs: a grid trial carries its own (``trial``); a
+    search trial is made from what Optuna sampled (``overrides``, on top of the budget's
+    ``budget_overrides``), its seed the index among its sample's seeds (Tune's Repeater numbers
+    the repeats of one Optuna sample 0..N-1)."""
+    if "trial" in config:
+        return TrialSpec(**config["trial"])
+    sampled = dict(config["overrides"])
+    return TrialSpec("search", "", None, config["task"], int(config.get(REPEAT_INDEX, 0)),
+                     {**config.get("budget_overrides", {}), **sampled}, sampled=sampled)
 
 
 def validate(space: str, task: str | None, budget: str, seeds: int) -> None:
@@ -102,13 +187,16 @@ def default_task(space: str, task: str | None) -> str | None:
     return {"smoke": SMOKE_TASK, "paper": None}.get(space, DEFAULT_TASK)
 
 
-def grid(space: str, task: str | None, seeds: int) -> list[TrialSpec]:
-    """The trials of a grid space (``ablation``, ``paper``, ``smoke``)."""
+def grid(space: str, task: str | None, seeds: int, budget: str = "paper") -> list[TrialSpec]:
+    """The trials of a grid space (``ablation``, ``paper``, ``smoke``) at ``budget``."""
+    from lac_rllib.tasks import get_task
+
     task = default_task(space, task)
     if space == "paper":
         tasks = (task,) if task else PAPER_TASKS
         return [TrialSpec("paper", "", None, t, s, {}) for t in tasks for s in range(seeds)]
-    groups = ABLATION if space == "ablation" else SMOKE if space == "smoke" else None
+    ablation = BUDGETS[budget].ablation_by_preset.get(get_task(task).preset, ABLATION)
+    groups = ablation if space == "ablation" else SMOKE if space == "smoke" else None
     if groups is None:
         raise ValueError(f"space {space!r} is not a grid")
     return [
@@ -117,6 +205,22 @@ def grid(space: str, task: str | None, seeds: int) -> list[TrialSpec]:
         for value in values
         for seed in range(seeds)
     ]
+
+
+def mark_defaults(trials: list[TrialSpec], budget: str, sets: dict) -> list[TrialSpec]:
+    """Flag the trials whose overrides change nothing: they run LAC's defaults (at this budget,
+    with the user's --set), the baseline every configuration is compared with."""
+    from lac_rllib.config import build_config
+
+    base, out = {}, []
+    for t in trials:
+        steps, overrides = BUDGETS[budget].for_task(t.task)
+        common = {**overrides, **sets}
+        if t.task not in base:
+            base[t.task] = build_config(t.task, 0, common, timesteps=steps).lac_params()
+        mine = build_config(t.task, 0, {**common, **t.overrides}, timesteps=steps).lac_params()
+        out.append(dataclasses.replace(t, default=mine == base[t.task]))
+    return out
 
 
 def tune_search_space() -> dict:

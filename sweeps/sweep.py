@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -14,20 +15,35 @@ from pathlib import Path
 import ray
 from ray import tune
 from ray.tune.schedulers import ASHAScheduler
+from ray.tune.search import Repeater
 from ray.tune.search.optuna import OptunaSearch
 
 from sweeps import spaces
+from sweeps.live_table import LiveTable
+from sweeps.plan import Plan
 from sweeps.record import SWEEP_FILE, sweep_record
-from sweeps.tracking import STATUS_TAG, STOPPED_TAG, SweepTracker
-from sweeps.trainable import LACTrainable
+from sweeps.tracking import (
+    CONFIG_ID_TAG,
+    CONFIG_TAG,
+    DEFAULT_TAG,
+    P_GROUP,
+    P_SEED,
+    P_SWEPT_PARAM,
+    P_SWEPT_VALUE,
+    P_TASK,
+    STATUS_TAG,
+    STOPPED_TAG,
+    SweepTracker,
+)
+from sweeps.trainable import LACTrainable, objective
 
 METRIC, MODE = "objective", "max"
-TABLE_COLUMNS = ["env_steps", "episode_return", "episode_cost", "nu", METRIC]
 
 
 class ConstrainedOptunaSearch(OptunaSearch):
     """OptunaSearch that hands each trial's constraint value (episode cost − limit, ≤ 0 is
-    feasible) to Optuna, whose TPE sampler reads it (NOTES.md: Tune's class never does)."""
+    feasible) to Optuna, whose TPE sampler reads it (Tune's class never does: docs/dependencies.md,
+    "Optuna constraints")."""
 
     def on_trial_complete(self, trial_id, result=None, error=False):
         ot_trial = self._ot_trials.get(trial_id)
@@ -40,6 +56,32 @@ class ConstrainedOptunaSearch(OptunaSearch):
         super().on_trial_complete(trial_id, result=result, error=error)
 
 
+class SeedRepeater(Repeater):
+    """Each configuration Optuna proposes, trained with ``repeat`` seeds (Tune's Repeater: one Tune
+    trial, and one MLflow run, per seed; the seed is the repeat's index). Optuna is told once per
+    configuration, when all its seeds are done: the objective of the seeds' mean return and mean
+    cost, and the constraint mean cost − limit. A failed seed (error, or no finished episode) is
+    left out of the means; a configuration whose seeds all failed is told as failed. On resume,
+    Tune's SearchGenerator restores the groups (Repeater.get_state) beside Optuna's study."""
+
+    def on_trial_complete(self, trial_id, result=None, error=False, **kwargs):
+        group = self._trial_id_to_group.get(trial_id)
+        if group is None:
+            return
+        keys = ("episode_return", "episode_cost", "cost_limit")
+        ok = not error and result and all(k in result and math.isfinite(result[k]) for k in keys)
+        group.report(trial_id, tuple(float(result[k]) for k in keys) if ok else (math.nan,) * 3)
+        if not group.finished_reporting():
+            return
+        seeds = [s for s in group.scores() if math.isfinite(s[0])]
+        if not seeds:
+            self.searcher.on_trial_complete(group.primary_trial_id, result=None, error=True)
+            return
+        ret, cost, limit = (sum(col) / len(seeds) for col in zip(*seeds))
+        self.searcher.on_trial_complete(group.primary_trial_id, result={
+            METRIC: objective(ret, cost, limit), "constraint": cost - limit, "n_seeds": len(seeds)})
+
+
 def versions() -> dict:
     import mlflow
     import torch
@@ -50,23 +92,26 @@ def versions() -> dict:
             "platform": platform.platform(), **runtime_versions()}
 
 
-def param_space(plan: dict, args, parent_run_id: str) -> dict:
+def param_space(plan: Plan, args, parent_run_id: str) -> dict:
     common = {
-        "timesteps": plan["timesteps"], "cpus": args.cpus_per_trial,
-        "tracking": {"uri": plan["tracking_uri"], "experiment": plan["experiment"], "parent_run_id": parent_run_id},
+        "timesteps": plan.timesteps, "cpus": args.cpus_per_trial,
+        "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
-    # The budget's overrides, then the user's --set, then what the trial sweeps.
-    budget = {**spaces.BUDGETS[plan["budget"]].overrides, **plan.get("sets", {})}
-    if plan["trials"] is None:  # search: Optuna samples the LAC fields
-        return {**common, "task": plan["task"], "seed": 0, "group": "search", "param": "", "value": None,
-                "budget_overrides": budget, "overrides": spaces.tune_search_space()}
+    # The budget's overrides (for the trial's task preset), then the user's --set, then what the trial sweeps.
+    budget = spaces.BUDGETS[plan.budget]
+
+    def base(task: str) -> dict:
+        return {**budget.for_task(task)[1], **plan.sets}
+
+    if plan.trials is None:  # search: Optuna samples the LAC fields
+        return {**common, "task": plan.task, "budget_overrides": base(plan.task),
+                "overrides": spaces.tune_search_space()}
+    # Tune turns dataclasses in a config into tuples: each TrialSpec travels as its dict.
     return {**common, "trial": tune.grid_search([
-        {"task": t.task, "seed": t.seed, "group": t.group, "param": t.param, "value": t.value, "label": t.label(),
-         "overrides": {**budget, **t.overrides}, "fail_at_iteration": t.fail_at_iteration}
-        for t in plan["trials"]])}
+        dataclasses.asdict(dataclasses.replace(t, overrides={**base(t.task), **t.overrides})) for t in plan.trials])}
 
 
-def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
+def run_sweep(plan: Plan, args, sweep_dir: Path, commit: str) -> int:
     if not ray.is_initialized():  # tests drive sweeps inside their own Ray session
         ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     biggest = max((n["Resources"].get("CPU", 0) for n in ray.nodes() if n["Alive"]), default=0)
@@ -76,18 +121,25 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
         return 2
     if args.max_concurrent is None and args.address:  # the plan could only count this machine's CPUs
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        plan["concurrency"] = min(plan["n_trials"], max(1, cpus // args.cpus_per_trial))
-        print(f"  cluster: {cpus} CPUs -> {plan['concurrency']} trials at once", flush=True)
-    tracker = SweepTracker(plan["tracking_uri"], plan["experiment"])
+        plan = dataclasses.replace(plan, concurrency=min(plan.n_trials, max(1, cpus // args.cpus_per_trial)))
+        print(f"  cluster: {cpus} CPUs -> {plan.concurrency} trials at once", flush=True)
+    tracker = SweepTracker(plan.tracking_uri, plan.experiment)
     state_file = sweep_dir / SWEEP_FILE
     previous = json.loads(state_file.read_text()) if args.resume else {}
     parent = tracker.start(
-        plan["name"],
-        params={k: v for k, v in vars(args).items()} | {"n_trials": plan["n_trials"], "timesteps": plan["timesteps"],
+        plan.name,
+        params={k: v for k, v in vars(args).items()} | {"n_trials": plan.n_trials, "timesteps": plan.timesteps,
                                                         "git_commit": commit, **versions()},
-        tags={"lac.space": plan["space"], "lac.budget": plan["budget"], "lac.sweep_name": plan["name"]},
+        tags={"lac.space": plan.space, "lac.budget": plan.budget, "lac.sweep_name": plan.name},
         run_id=previous.get("parent_run_id"),
     )
+    links = tracker.links(parent)
+    print_links(links)
+    if not args.resume:
+        tracker.set_note(parent, f"**Sweep `{plan.name}` running**: {plan.n_trials} trials of "
+                                 f"{plan.timesteps:,} env steps ({plan.space}, "
+                                 f"task {plan.task or 'paper tasks'}). "
+                                 "The summary replaces this note when the sweep ends.")
     # The record first: from here on a failure leaves a sweep that --resume can pick up (with
     # the same parent run), never a directory that is neither startable nor resumable.
     sweep_dir.mkdir(parents=True, exist_ok=True)
@@ -95,9 +147,7 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
     try:
         tuner = _tuner(plan, args, parent, sweep_dir)
         if not args.resume:
-            plan_json = {k: v for k, v in plan.items() if k != "trials"} | {
-                "trial_labels": [t.label() for t in plan["trials"]] if plan["trials"] else None}
-            tracker.client.log_text(parent, json.dumps(plan_json, indent=2, default=str), "plan.json")
+            tracker.client.log_text(parent, json.dumps(plan.record(), indent=2, default=str), "plan.json")
     except BaseException:
         tracker.client.set_tag(parent, STATUS_TAG, "failed to start")
         tracker.client.set_terminated(parent, status="FAILED")
@@ -105,27 +155,38 @@ def run_sweep(plan: dict, args, sweep_dir: Path, commit: str) -> int:
     # Tune stops gracefully on SIGINT and SIGUSR1 (saving its state); SIGTERM (`kill`, a job
     # scheduler) would kill the driver mid-write. Route it to the same graceful stop.
     previous_term = signal.signal(signal.SIGTERM, lambda *_: os.kill(os.getpid(), signal.SIGUSR1))
+    # Tune's newer console output ignores a ProgressReporter; the live table is one (sweeps/live_table.py).
+    os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
     try:
         grid = tuner.fit()
     finally:
         signal.signal(signal.SIGTERM, previous_term)
     n_errors, n_done = grid.num_errors, grid.num_terminated
-    if n_done + n_errors < plan["n_trials"]:  # stopped by a signal: trials are left to run
+    if n_done + n_errors < plan.n_trials:  # stopped by a signal: trials are left to run
         closed = close_open_children(tracker, parent, "KILLED")
         tracker.client.set_tag(parent, STATUS_TAG, "interrupted")
         tracker.client.set_terminated(parent, status="KILLED")
-        print(f"interrupted: {n_done} of {plan['n_trials']} trials finished ({n_errors} failed, {closed} runs closed "
+        print(f"interrupted: {n_done} of {plan.n_trials} trials finished ({n_errors} failed, {closed} runs closed "
               f"as KILLED); resume with --resume", file=sys.stderr, flush=True)
         return 130
     stopped = close_open_children(tracker, parent, "FINISHED", tags={STOPPED_TAG: "1"})  # ASHA's early stops
-    close_sweep(tracker, parent, n_errors)
-    print(f"sweep done: {n_done} of {plan['n_trials']} trials finished ({stopped} stopped early by the scheduler), "
-          f"{n_errors} failed; MLflow parent run {parent}")
-    print(f"  mlflow ui --backend-store-uri {plan['tracking_uri']}")
+    outcome = (f"{n_done} of {plan.n_trials} trials finished ({stopped} stopped early by the scheduler), "
+               f"{n_errors} failed")
+    close_sweep(tracker, parent, n_errors, heading=f"**Sweep `{plan.name}`**: {outcome}.")
+    print(f"sweep done: {outcome}; MLflow parent run {parent}")
+    print_links(links, plan.tracking_uri)
     return 0
 
 
-def _tuner(plan: dict, args, parent: str, sweep_dir: Path) -> tune.Tuner:
+def print_links(links: dict, uri: str | None = None) -> None:
+    """Where to look in the MLflow UI (the runs in "Model training" mode, and the parent run)."""
+    if uri and not uri.startswith(("http://", "https://")):
+        print(f"  start the UI: mlflow ui --backend-store-uri {uri}")
+    print(f"  MLflow runs:       {links['runs']}")
+    print(f"  MLflow parent run: {links['run']}", flush=True)
+
+
+def _tuner(plan: Plan, args, parent: str, sweep_dir: Path) -> tune.Tuner:
     """Tune's state if the sweep has one (resume), else a new Tuner (also for a sweep whose
     first start failed before Tune wrote anything)."""
     trainable = tune.with_resources(LACTrainable, {"cpu": args.cpus_per_trial})
@@ -134,24 +195,32 @@ def _tuner(plan: dict, args, parent: str, sweep_dir: Path) -> tune.Tuner:
     failure = tune.FailureConfig(max_failures=args.max_failures)
     ckpt = tune.CheckpointConfig(checkpoint_frequency=1, num_to_keep=2, checkpoint_at_end=True)
     run_config = tune.RunConfig(
-        name=plan["name"], storage_path=plan["storage"], failure_config=failure, checkpoint_config=ckpt,
-        progress_reporter=tune.CLIReporter(metric_columns=TABLE_COLUMNS, max_report_frequency=30),
-        verbose=1,
+        name=plan.name, storage_path=plan.storage, failure_config=failure, checkpoint_config=ckpt,
+        progress_reporter=LiveTable(plan.n_trials, plan.concurrency), verbose=1,
     )
     search = None
-    if plan["trials"] is None:
+    if plan.trials is None:
         import optuna
 
-        search = ConstrainedOptunaSearch(sampler=optuna.samplers.TPESampler(seed=args.optuna_seed),
-                                         metric=METRIC, mode=MODE)
-    scheduler = (ASHAScheduler(time_attr="env_steps", metric=METRIC, mode=MODE, max_t=plan["timesteps"],
-                               grace_period=max(1, plan["timesteps"] // 4)) if args.scheduler == "asha" else None)
+        # The study lives in its own storage (plan.optuna_storage) under the sweep's name:
+        # optuna-dashboard opens it, and a resumed sweep goes on with the same study.
+        optuna_search = ConstrainedOptunaSearch(sampler=optuna.samplers.TPESampler(seed=args.optuna_seed),
+                                                metric=METRIC, mode=MODE, study_name=plan.name,
+                                                storage=optuna.storages.RDBStorage(plan.optuna_storage))
+        search = SeedRepeater(optuna_search, repeat=args.seeds)
+    scheduler = (ASHAScheduler(time_attr="env_steps", metric=METRIC, mode=MODE, max_t=plan.timesteps,
+                               grace_period=max(1, plan.timesteps // 4)) if args.scheduler == "asha" else None)
     return tune.Tuner(
         trainable, param_space=param_space(plan, args, parent),
-        tune_config=tune.TuneConfig(num_samples=plan["n_trials"] if search else 1, search_alg=search,
-                                    scheduler=scheduler, max_concurrent_trials=plan["concurrency"]),
+        tune_config=tune.TuneConfig(num_samples=plan.n_trials if search else 1, search_alg=search,
+                                    scheduler=scheduler, max_concurrent_trials=plan.concurrency,
+                                    trial_name_creator=_trial_name),
         run_config=run_config,
     )
+
+
+def _trial_name(trial) -> str:
+    return spaces.trial_spec(trial.config).label()
 
 
 def close_open_children(tracker: SweepTracker, parent: str, status: str, tags: dict | None = None) -> int:
@@ -166,34 +235,41 @@ def close_open_children(tracker: SweepTracker, parent: str, status: str, tags: d
     return n
 
 
-def close_sweep(tracker: SweepTracker, parent: str, n_errors: int) -> None:
+def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str) -> None:
     """Summary table, best configuration and plots on the parent run, read back from MLflow
-    (the record of every trial, resumed ones included)."""
+    (the record of every trial, resumed ones included); the summary is the parent run's note."""
     import pandas as pd
 
-    from sweeps.report import write_sweep_reports
+    from sweeps.report import note_markdown, summarize, write_sweep_reports
 
     rows, curves = [], {}
     for run in tracker.children(parent):
         p, m, tid = run.data.params, run.data.metrics, run.data.tags.get("lac.trial_id", run.info.run_id)
-        value = json.loads(p.get("swept_value", "null"))
-        rows.append({"trial_id": tid, "group": p.get("group", ""), "param": p.get("swept_param", ""), "value": value,
-                     "task": p.get("task"), "seed": int(p.get("seed", 0)),
+        value = json.loads(p.get(P_SWEPT_VALUE, "null"))
+        rows.append({"trial_id": tid, "group": p.get(P_GROUP, ""), "param": p.get(P_SWEPT_PARAM, ""), "value": value,
+                     "task": p.get(P_TASK), "seed": int(p.get(P_SEED, 0)),
+                     "config": run.data.tags.get(CONFIG_TAG, ""), "config_id": run.data.tags.get(CONFIG_ID_TAG, ""),
+                     "default": run.data.tags.get(DEFAULT_TAG) == "1",
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
                      if run.info.status == "FINISHED" else "ERROR",
                      **{k: m.get(k, float("nan")) for k in ("episode_return", "episode_cost", "cost_limit",
                                                             "feasible", "objective")},
                      **{k: p[k] for k in ("langevin_steps", "langevin_step_size", "temperature", "beta") if k in p}})
         hist = {k: tracker.client.get_metric_history(run.info.run_id, k) for k in ("episode_return", "episode_cost")}
+        n_points = len(hist["episode_return"])
         curves[tid] = pd.DataFrame({"env_steps": [x.step for x in hist["episode_return"]],
                                     "episode_return": [x.value for x in hist["episode_return"]],
-                                    "episode_cost": [x.value for x in hist["episode_cost"]][:len(hist["episode_return"])],
+                                    "episode_cost": [x.value for x in hist["episode_cost"]][:n_points],
                                     "cost_limit": m.get("cost_limit", float("nan"))})
     trials = pd.DataFrame(rows)
     with tempfile.TemporaryDirectory() as tmp:
         if len(trials):
             write_sweep_reports(trials, curves, tmp)
         tracker.client.log_artifacts(parent, tmp, "summary")
+    footer = ("Files: `summary/summary.md` (every column), `summary/aggregates.png` (these statistics), "
+              "`summary/cost_boxplots.png`, `summary/learning_curves.png`; one child run per trial (group them "
+              "by the tag `lac.config` in the runs table to see one averaged curve per configuration).")
+    tracker.set_note(parent, note_markdown(summarize(trials), heading, footer) if len(trials) else heading)
     tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
     tracker.client.set_tag(parent, STATUS_TAG, "finished")
     tracker.client.set_terminated(parent, status="FINISHED")

@@ -30,7 +30,18 @@ CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
 ERROR_TAG = "lac.error"  # the last error of a failed attempt (cleared when a retry starts)
 STATUS_TAG = "lac.sweep_status"  # on the parent run: finished | interrupted
 STOPPED_TAG = "lac.stopped_early"  # on a child run the scheduler (ASHA) stopped before its budget
+# A child run's params besides every LAC field (written by sweeps/trainable.py, read by the report).
+P_TASK, P_SEED, P_GROUP, P_TIMESTEPS = "task", "seed", "group", "timesteps"
+P_SWEPT_PARAM, P_SWEPT_VALUE = "swept_param", "swept_value"  # the grid point: which field, which value
+CONFIG_ID_TAG = "lac.config_id"  # a child run's configuration without its seed (spaces.config_id)
+CONFIG_TAG = "lac.config"  # the same, readable (group-param=value-task, or the search sample)
+DEFAULT_TAG = "lac.default_config"  # "1" on runs of LAC's defaults: the report's baseline
 PARENT_TAG = "mlflow.parentRunId"
+NOTE_TAG = "mlflow.note.content"  # a run's description, rendered as markdown on its page
+# MLflow 3's UI opens an experiment without this tag in GenAI mode (an empty "Traces" page);
+# "custom_model_development" is its "Model training" kind, where runs, params and metrics show.
+EXPERIMENT_KIND_TAG, MODEL_TRAINING_KIND = "mlflow.experimentKind", "custom_model_development"
+DEFAULT_UI = "http://127.0.0.1:5000"  # where `mlflow ui` serves a local store
 GAP_TAG, GAP_SECONDS_TAG = "lac.tracking_gap_retries", "lac.tracking_gap_s"
 RETRY_S = float(os.environ.get("LAC_TRACKING_RETRY_S", "120"))  # how long a call waits for the server
 
@@ -54,16 +65,33 @@ def check_reachable(uri: str) -> None:
             with urllib.request.urlopen(uri.rstrip("/") + "/health", timeout=5) as r:
                 r.read()
         except Exception as e:  # noqa: BLE001 - any failure means unreachable
-            raise ValueError(f"--tracking-uri {uri} is unreachable ({e}); start `mlflow server` or fix the URI") from None
+            raise ValueError(f"--tracking-uri {uri} is unreachable ({e}); "
+                             "start `mlflow server` or fix the URI") from None
         return
     raise ValueError(f"--tracking-uri {uri!r}: accepted: sqlite:///ABSOLUTE/PATH.db or http(s)://HOST:PORT")
 
 
 def experiment_id(client: MlflowClient, name: str, artifact_root: str | None) -> str:
+    """The experiment's id, created (or tagged, if older) with the model-training kind."""
     exp = client.get_experiment_by_name(name)
-    if exp is not None:
-        return exp.experiment_id
-    return client.create_experiment(name, artifact_location=artifact_root)
+    if exp is None:
+        return client.create_experiment(name, artifact_location=artifact_root,
+                                        tags={EXPERIMENT_KIND_TAG: MODEL_TRAINING_KIND})
+    if EXPERIMENT_KIND_TAG not in exp.tags:  # a user's own choice of kind is left alone
+        client.set_experiment_tag(exp.experiment_id, EXPERIMENT_KIND_TAG, MODEL_TRAINING_KIND)
+    return exp.experiment_id
+
+
+def ui_links(uri: str, experiment: str, run_id: str | None = None) -> dict[str, str]:
+    """Direct links into the MLflow UI: the experiment's runs in "Model training" mode, and a run.
+
+    A server's UI is at its tracking URI; a local store's at ``mlflow ui``'s default address.
+    """
+    base = uri.rstrip("/") if uri.startswith(("http://", "https://")) else DEFAULT_UI
+    links = {"runs": f"{base}/#/experiments/{experiment}/runs?workflowType=machine_learning"}
+    if run_id:
+        links["run"] = f"{base}/#/experiments/{experiment}/runs/{run_id}"
+    return links
 
 
 def local_artifact_root(uri: str) -> str | None:
@@ -257,6 +285,13 @@ class SweepTracker:
         run = self.client.create_run(self.experiment_id, run_name=name, tags={SWEEP_TAG: "1", **tags})
         self.client.log_batch(run.info.run_id, params=_params(params))
         return run.info.run_id
+
+    def links(self, run_id: str | None = None) -> dict[str, str]:
+        return ui_links(self.uri, self.experiment_id, run_id)
+
+    def set_note(self, run_id: str, markdown: str) -> None:
+        """The run's description in the UI (MLflow's note)."""
+        self.client.set_tag(run_id, NOTE_TAG, markdown)
 
     def children(self, parent_run_id: str) -> list:
         return self.client.search_runs(

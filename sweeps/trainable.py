@@ -18,10 +18,25 @@ import ray
 from ray import tune
 
 from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+from lac_rllib.config import build_config
 from lac_rllib.learner import REPORTED_KEYS
-from lac_rllib.train import build_config
+from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
-from sweeps.tracking import CHECKPOINT_TAG, ERROR_TAG, NODE_TAG, TrialTracker
+from sweeps.tracking import (
+    CHECKPOINT_TAG,
+    CONFIG_ID_TAG,
+    CONFIG_TAG,
+    DEFAULT_TAG,
+    ERROR_TAG,
+    NODE_TAG,
+    P_GROUP,
+    P_SEED,
+    P_SWEPT_PARAM,
+    P_SWEPT_VALUE,
+    P_TASK,
+    P_TIMESTEPS,
+    TrialTracker,
+)
 
 INFEASIBLE_OFFSET = 1e6
 
@@ -35,27 +50,26 @@ def objective(ret: float, cost: float, limit: float) -> float:
 
 
 class LACTrainable(tune.Trainable):
-    """config: task, seed, timesteps, overrides, group/param/value, tracking{uri, experiment,
-    parent_run_id}, cpus; ``fail_at_iteration`` makes the trial raise (tests the failure path)."""
+    """One trial. config: ``trial`` (a grid trial's TrialSpec) or, for a search, ``task``,
+    ``budget_overrides`` and the sampled ``overrides`` (spaces.trial_spec makes both a TrialSpec);
+    ``timesteps``, ``cpus``, ``tracking`` {uri, experiment, parent_run_id}."""
 
     def setup(self, config: dict) -> None:
-        # Grid trials carry their point under "trial"; search trials get sampled "overrides"
-        # on top of the budget's.
-        config = {**config, **config.get("trial", {})}
-        self.spec = config
-        overrides = {**config.get("budget_overrides", {}), **config.get("overrides", {}),
-                     "torch_threads": int(config.get("cpus", 1))}
+        self.spec = spec = spaces.trial_spec(config)
         self.timesteps = int(config["timesteps"])
-        self.lac_config = build_config(config["task"], int(config["seed"]), overrides, timesteps=self.timesteps)
+        overrides = {**spec.overrides, "torch_threads": int(config.get("cpus", 1))}
+        self.lac_config = build_config(spec.task, spec.seed, overrides, timesteps=self.timesteps)
         self.algo = self.lac_config.build_algo()
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
-                                    config.get("label") or f"search-{self.trial_name}")
-        params = {"task": config["task"], "seed": config["seed"], "group": config.get("group", ""),
-                  "swept_param": config.get("param", ""), "swept_value": config.get("value"),
-                  "timesteps": self.timesteps, **self.lac_config.lac_params()}
+                                    spec.label())
+        params = {P_TASK: spec.task, P_SEED: spec.seed, P_GROUP: spec.group, P_SWEPT_PARAM: spec.param,
+                  P_SWEPT_VALUE: spec.value, P_TIMESTEPS: self.timesteps, **self.lac_config.lac_params()}
         tags = {NODE_TAG: ray.get_runtime_context().get_node_id(), "lac.host": socket.gethostname(),
-                "lac.tune_trial_name": self.trial_name, "lac.group": config.get("group", "")}
+                "lac.tune_trial_name": self.trial_name, "lac.group": spec.group,
+                # MLflow's UI groups runs by a tag and averages their curves: one group per configuration.
+                CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, self.lac_config.lac_params()),
+                CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if self._is_default(spec) else "0"}
         self.tracker.open(params, tags)
         prev = self.tracker.previous
         # A trial killed after its run FINISHED but before Tune persisted its last checkpoint is
@@ -70,12 +84,21 @@ class LACTrainable(tune.Trainable):
         self.tracker.log_text(json.dumps({**params, "cost_limit": self.lac_config.effective_cost_limit},
                                          indent=2, default=str), "config.json")
 
+    def _is_default(self, spec: spaces.TrialSpec) -> bool:
+        """A grid trial knows (spaces.mark_defaults); a search sample is LAC's defaults when what
+        Optuna sampled equals what the budget's configuration has anyway."""
+        if spec.sampled is None:
+            return spec.default
+        budget_only = {k: v for k, v in spec.overrides.items() if k not in spec.sampled}
+        base = build_config(spec.task, 0, budget_only, timesteps=self.timesteps)
+        return all(getattr(base, k) == v for k, v in spec.sampled.items())
+
     def step(self) -> dict:
         if self.already_finished:
             final = {k: v for k, v in self.tracker.previous.data.metrics.items()}
             return {**final, "done": True}
         try:
-            if self.iteration + 1 == self.spec.get("fail_at_iteration"):
+            if self.iteration + 1 == self.spec.fail_at_iteration:
                 raise RuntimeError(f"injected failure at iteration {self.iteration + 1} (fail_at_iteration)")
             r = self.algo.train()
             learner = r.get("learners", {}).get("default_policy", {})

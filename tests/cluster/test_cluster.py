@@ -27,7 +27,7 @@ import pytest
 import requests
 
 # One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).
-pytestmark = pytest.mark.xdist_group("cluster")
+pytestmark = [pytest.mark.xdist_group("cluster"), pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "docker" / "cluster.sh"
@@ -225,6 +225,24 @@ def assert_finished_sweep(rest, name, n_trials, out):
     return trials
 
 
+def assert_opens_on_the_results(rest, name, uri, out):
+    """The MLflow UI opens on the results: model-training experiment, links printed, note on the parent."""
+    exp = rest.experiment_id(name)
+    tags = {t["key"]: t["value"] for t in rest.get("mlflow/experiments/get", experiment_id=exp)["experiment"]["tags"]}
+    assert tags.get("mlflow.experimentKind") == "custom_model_development", tags
+    parent = next(r for r in rest.runs(name) if r["tags"].get("lac.sweep") == "1")
+    runs_link = f"{uri.rstrip('/')}/#/experiments/{exp}/runs?workflowType=machine_learning"
+    run_link = f"{uri.rstrip('/')}/#/experiments/{exp}/runs/{parent['id']}"
+    assert out.count(runs_link) == 2 and out.count(run_link) == 2, out[-3000:]  # at start and at the end
+    note = parent["tags"]["mlflow.note.content"]
+    assert note.startswith(f"**Sweep `{name}`**: 4 of 4 trials finished"), note
+    assert "**Best feasible configuration:**" in note
+    for what in ("5", "10 (default)"):  # one row per swept value, with its seed count
+        assert f"| smoke | langevin_steps={what} | 2 |" in note, note
+    labels = sorted(t["tags"]["mlflow.runName"] for t in rest.trials(name))
+    assert labels == [f"smoke-langevin_steps={v}-PointHazard-v0-s{s}" for v in (10, 5) for s in (0, 1)], labels
+
+
 def test_sweep_on_two_nodes_with_a_tracking_server(cluster, rest, start_sweep):
     cluster.ensure_worker()
     head, worker = cluster.node_ids()
@@ -233,6 +251,7 @@ def test_sweep_on_two_nodes_with_a_tracking_server(cluster, rest, start_sweep):
     assert proc.returncode == 0, out[-3000:]
 
     trials = assert_finished_sweep(rest, "healthy", 4, out)
+    assert_opens_on_the_results(rest, "healthy", cluster.uri, out)
     for t in trials:
         assert [m["step"] for m in rest.history(t["id"], "env_steps")] == STEPS
         for key in ("episode_return", "episode_cost", "nu", "critic_loss", "objective"):

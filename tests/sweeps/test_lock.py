@@ -48,7 +48,7 @@ def test_two_resume_drivers_at_once(tmp_path):
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
     args = cli.parse_args(base)
     plan = cli.make_plan(args)
-    sweep_dir = Path(plan["storage"]) / plan["name"]
+    sweep_dir = Path(plan.storage) / plan.name
     sweep_dir.mkdir(parents=True)
     (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
     with DriverLock(sweep_dir):  # the first driver, alive

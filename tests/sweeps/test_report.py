@@ -8,7 +8,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-
 from sweeps import report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -94,14 +93,28 @@ def test_best_configuration_prefers_feasible_and_none_when_infeasible():
 def test_markdown_table():
     s = report.summarize(hand_table())
     md = report.markdown_table(s)
-    assert "| group | swept | value | task | seeds | return (mean ± std) | cost (mean ± std) | limit | feasible |" in md
+    assert ("| group | configuration | task | seeds | return mean [95% CI] | return IQM [95% CI] | cost mean [95% CI] "
+            "| cost IQM [95% CI] | feasible seeds | P(return > default) | P(cost < default) | return (mean ± std) "
+            "| cost (mean ± std) | limit |") in md
     body = [ln for ln in md.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
     assert len(body) == len(s) == 5
-    assert "| VT | langevin_steps | 10 | PointGoal1 | 3 (+3 failed) | 12.00 ± 2.00 | 24.00 ± 4.00 | 25.00 |" in md
-    assert "20.00 ± –" in md and "nan" not in md.lower()
-    assert "| 0 (+1 failed) | – | – | 25.00 | no (all failed) |" in md
+    vt10 = next(ln for ln in body if ln.startswith("| VT | langevin_steps=10 |"))
+    assert vt10.startswith("| VT | langevin_steps=10 | PointGoal1 | 3 (+3 failed) | 12.00 [10.")
+    assert vt10.endswith("| 2/3 | – | – | 12.00 ± 2.00 | 24.00 ± 4.00 | 25.00 |")  # no default in this sweep
+    assert "20.00 [–]" in md and "20.00 ± –" in md and "nan" not in md.lower()
+    assert "| 0 (+1 failed) | – | – | – | – | no (all failed) | – | – | – | – | 25.00 |" in md
+    assert "over 1-3 seeds per configuration. **Warning: fewer than 5 seeds" in md
     assert "**Best feasible configuration:** VT langevin_steps=30 on PointGoal1" in md
     assert "none" in report.markdown_table(report.summarize(hand_table(limit=0.5))).splitlines()[-1]
+
+
+def test_configurations_are_compared_with_the_default():
+    df = hand_table()
+    df["default"] = df["value"].eq(20)  # VT T=20 plays LAC's defaults: returns 30, 32; costs 40, 44
+    s = report.summarize(df).set_index("value")
+    assert bool(s.loc[20, "is_default"]) and s.loc[20, "poi_return_vs_default"] == 0.5
+    assert s.loc[10, "poi_return_vs_default"] == 0.0 and s.loc[10, "poi_cost_vs_default"] == 1.0
+    assert "| langevin_steps=20 (default) |" in report.markdown_table(s.reset_index())
 
 
 def test_plots_write_pngs(tmp_path):
@@ -109,6 +122,7 @@ def test_plots_write_pngs(tmp_path):
     assert_png(report.cost_box_plots(trials, tmp_path / "box.png"))
     assert_png(report.learning_curves(trials, curves, tmp_path / "curves.png"))
     assert_png(report.trial_curve(curves["VT_10_0"], tmp_path / "one.png", "VT_10_0"))
+    assert_png(report.aggregate_plots(report.summarize(trials), tmp_path / "aggregates.png"))
 
 
 def test_plots_return_none_when_nothing_to_plot(tmp_path):
@@ -123,7 +137,8 @@ def test_plots_return_none_when_nothing_to_plot(tmp_path):
 def test_write_sweep_reports(tmp_path):
     trials, curves = sweep()
     paths = report.write_sweep_reports(trials, curves, tmp_path / "out")
-    names = {"summary.csv", "summary.md", "best.json", "trials.csv", "cost_boxplots.png", "learning_curves.png"}
+    names = {"summary.csv", "summary.md", "best.json", "trials.csv", "cost_boxplots.png", "learning_curves.png",
+             "aggregates.png"}
     assert set(paths) == names and all(Path(p).exists() for p in paths.values())
     n_configs = 4 + 4 + 4 + 1  # NI + VT (incl. the all-errored value 50) + PR + paper
     assert len(pd.read_csv(paths["summary.csv"])) == n_configs

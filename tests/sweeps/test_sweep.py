@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -15,6 +16,7 @@ from mlflow.tracking import MlflowClient
 from lac_rllib.learner import CHAIN_HEALTH_KEYS
 from sweeps import run as cli
 from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
+from sweeps.trainable import objective
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -37,20 +39,39 @@ def _runs(tmp_path):
 def _sweep(tmp_path, args, mutate=None):
     plan = cli.make_plan(args)
     if mutate:
-        plan["trials"] = mutate(plan["trials"])
-    return run_sweep(plan, args, Path(plan["storage"]) / plan["name"], "test-commit")
+        plan = dataclasses.replace(plan, trials=mutate(plan.trials))
+    return run_sweep(plan, args, Path(plan.storage) / plan.name, "test-commit")
 
 
-def test_smoke_sweep_end_to_end(ray_session, tmp_path):
+@pytest.mark.slow
+def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
     assert _sweep(tmp_path, _args(tmp_path, "--set", "obs_std_floor=0.05")) == 0
+    out = capsys.readouterr().out
     client, parents, children = _runs(tmp_path)
     assert len(parents) == 1 and len(children) == 4
     parent = parents[0]
     assert parent.info.status == "FINISHED"
+    # MLflow opens on the results: model-training kind, direct links (printed at start and end), the note.
+    exp = client.get_experiment_by_name("test")
+    assert exp.tags["mlflow.experimentKind"] == "custom_model_development"
+    links = (f"http://127.0.0.1:5000/#/experiments/{exp.experiment_id}/runs?workflowType=machine_learning",
+             f"http://127.0.0.1:5000/#/experiments/{exp.experiment_id}/runs/{parent.info.run_id}")
+    assert all(out.count(link) == 2 for link in links), out[-3000:]
+    note = parent.data.tags["mlflow.note.content"]
+    assert note.startswith("**Sweep `smoke-PointHazard-v0-smoke`**: 4 of 4 trials finished"), note
+    assert "| smoke | langevin_steps=5 | 2 |" in note and "| smoke | langevin_steps=10 (default) | 2 |" in note, note
+    assert sorted(c.data.tags["mlflow.runName"] for c in children) == [
+        f"smoke-langevin_steps={v}-PointHazard-v0-s{s}" for v in (10, 5) for s in (0, 1)]
+    # The live table: what each trial is, its figures, and a progress line.
+    headers = ("status", "iter", "env steps", "return", "cost", "feasible", "ν")
+    assert "trial  " in out and all(h in out for h in headers)
+    assert re.search(r"smoke-langevin_steps=5-PointHazard-v0-s1 +TERMINATED +4 +2,000 ", out), out[-3000:]
+    assert "progress: 4/4 trials done · 0 running · ETA ~0 min (mean" in out, out[-3000:]
+    assert "...iteration" not in out
     assert {"ray", "torch", "mujoco", "numpy", "git_commit", "space", "seeds"} <= set(parent.data.params)
     summary = {a.path for a in client.list_artifacts(parent.info.run_id, "summary")}
     assert {"summary/summary.csv", "summary/summary.md", "summary/best.json", "summary/cost_boxplots.png",
-            "summary/learning_curves.png"} <= summary
+            "summary/learning_curves.png", "summary/aggregates.png"} <= summary
     assert "plan.json" in {a.path for a in client.list_artifacts(parent.info.run_id)}
     assert sorted(json.loads(c.data.params["langevin_steps"]) for c in children) == [5, 5, 10, 10]
     for c in children:
@@ -71,6 +92,7 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path):
         assert "rllib_checkpoint.json" in json.loads(c.data.tags["lac.checkpoint_sha256"])  # the manifest
 
 
+@pytest.mark.slow
 def test_a_failing_trial_does_not_stop_the_others(ray_session, tmp_path):
     args = _args(tmp_path, "--max-failures", "0", "--seeds", "1")
     fail_first = lambda trials: [dataclasses.replace(trials[0], fail_at_iteration=2), *trials[1:]]  # noqa: E731
@@ -83,24 +105,46 @@ def test_a_failing_trial_does_not_stop_the_others(ray_session, tmp_path):
     assert parents[0].data.tags["lac.failed_trials"] == "1"
 
 
-def test_search_hands_constraints_to_optuna(ray_session, tmp_path):
+@pytest.mark.slow
+def test_search_scores_each_configuration_over_its_seeds(ray_session, tmp_path):
     args = cli.parse_args(["--space", "search", "--task", "lac/PointHazard-v0", "--budget", "smoke",
-                           "--num-samples", "3", "--max-concurrent", "2",
+                           "--num-samples", "3", "--seeds", "2", "--max-concurrent", "2",
                            "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
                            "--storage", str(tmp_path / "ray_results"), "--experiment", "test"])
     assert _sweep(tmp_path, args) == 0
+    _, parents, children = _runs(tmp_path)
+    assert len(children) == 6 and all(c.info.status == "FINISHED" for c in children)
+    by_config = {}
+    for c in children:
+        by_config.setdefault(c.data.tags["lac.config_id"], []).append(c)
+    assert len(by_config) == 3, "lac.config_id: one per Optuna sample, shared by its seeds"
+    for runs in by_config.values():
+        assert sorted(json.loads(r.data.params["seed"]) for r in runs) == [0, 1]
+        assert len({r.data.params["temperature"] for r in runs}) == 1  # the same sample
+        labels = {r.data.tags["lac.config"] for r in runs}
+        assert len(labels) == 1 and labels.pop().startswith("search-T=")
+    # Optuna was told once per configuration: the objective and the constraint of the seed means.
     searcher = ConstrainedOptunaSearch()
     searcher.restore_from_dir(str(tmp_path / "ray_results" / "search-PointHazard-v0-smoke"))
-    trials = searcher._ot_study.trials
-    assert len(trials) == 3
-    _, _, children = _runs(tmp_path)
-    expected = sorted(round(c.data.metrics["constraint"], 6) for c in children)
-    got = sorted(round(t.system_attrs["constraints:episode_cost_minus_limit"], 6)
-                 if "constraints:episode_cost_minus_limit" in t.system_attrs else
-                 round(t.system_attrs["constraints"][0], 6) for t in trials)
+    study = searcher._ot_study
+    assert len(study.trials) == 3
+    expected = {}
+    for runs in by_config.values():
+        m = [r.data.metrics for r in runs]
+        ret, cost = (sum(x[k] for x in m) / 2 for k in ("episode_return", "episode_cost"))
+        limit = m[0]["cost_limit"]
+        t = json.loads(runs[0].data.params["langevin_steps"])
+        expected[t] = (round(objective(ret, cost, limit), 6), round(cost - limit, 6))
+    def constraint(t):
+        attrs = t.system_attrs
+        return attrs["constraints:episode_cost_minus_limit"] if "constraints:episode_cost_minus_limit" in attrs \
+            else attrs["constraints"][0]
+
+    got = {t.params.get("overrides/langevin_steps", t.params.get("langevin_steps")):
+           (round(t.value, 6), round(constraint(t), 6)) for t in study.trials}
     assert got == expected
-    sampled = {json.loads(c.data.params["temperature"]) for c in children}
-    assert len(sampled) == 3 and all(1e-4 <= t <= 1e-2 for t in sampled)
+    note = parents[0].data.tags["mlflow.note.content"]
+    assert "over 2 seeds per configuration" in note and "Warning: fewer than 5 seeds" in note
 
 
 def _cli(tmp_path, *extra, **kw):
@@ -110,14 +154,14 @@ def _cli(tmp_path, *extra, **kw):
     return subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
 
 
-def _wait_for_children(tmp_path, ready, timeout=300) -> list:
+def _wait_for_children(tmp_path, ready, timeout=300, name="smoke-PointHazard-v0-smoke") -> list:
     """Poll the running smoke sweep's child runs until ``ready(children)``; return them."""
     deadline, children = time.time() + timeout, []
     while time.time() < deadline:
         time.sleep(2)
         # sweep.json is written after the parent run exists: polling earlier could race the
         # driver creating MLflow's tables.
-        if (tmp_path / "ray_results" / "smoke-PointHazard-v0-smoke" / "sweep.json").exists():
+        if (tmp_path / "ray_results" / name / "sweep.json").exists():
             try:
                 _, _, children = _runs(tmp_path)
             except Exception:  # noqa: BLE001 - the store may be mid-creation
@@ -127,6 +171,7 @@ def _wait_for_children(tmp_path, ready, timeout=300) -> list:
     return children
 
 
+@pytest.mark.slow
 def test_resume_after_driver_sigkill(tmp_path):
     proc = _cli(tmp_path, start_new_session=True)
     try:  # one finished trial and one started after it
@@ -154,9 +199,8 @@ def test_resume_after_driver_sigkill(tmp_path):
         assert steps[-1] == 2000 and steps == sorted(steps)
 
 
+@pytest.mark.slow
 def test_sigint_stops_cleanly_and_resume_completes_the_rest(tmp_path):
-    import re
-
     proc = _cli(tmp_path, start_new_session=True)
     try:  # one trial finished and the next one running
         _wait_for_children(tmp_path, lambda cs: any(c.info.status == "FINISHED" for c in cs)
@@ -184,6 +228,46 @@ def test_sigint_stops_cleanly_and_resume_completes_the_rest(tmp_path):
     for c in children:
         steps = [m.step for m in client.get_metric_history(c.info.run_id, "env_steps")]
         assert steps == sorted(set(steps)) and steps[-1] == 2000, steps  # no duplicate metric steps
+
+
+@pytest.mark.slow
+def test_a_resumed_search_continues_its_optuna_study(tmp_path):
+    import optuna
+
+    name, storage = "search-PointHazard-v0-smoke", f"sqlite:///{tmp_path / 'optuna.db'}"
+    search = ("--space", "search", "--task", "lac/PointHazard-v0", "--num-samples", "3", "--seeds", "1")
+    proc = _cli(tmp_path, *search, start_new_session=True)
+    try:  # one sample finished, the next one running
+        _wait_for_children(tmp_path, lambda cs: any(c.info.status == "FINISHED" for c in cs)
+                           and any(c.info.status == "RUNNING" for c in cs), name=name)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, out[-3000:]
+    assert f"Optuna study '{name}': {storage}  (optuna-dashboard {storage})" in out  # the plan says where
+    (before,) = optuna.get_all_study_summaries(storage)
+    assert before.study_name == name and 1 <= before.n_trials < 3
+
+    resumed = _cli(tmp_path, *search, "--resume")
+    out, _ = resumed.communicate(timeout=600)
+    assert resumed.returncode == 0, out[-3000:]
+    (after,) = optuna.get_all_study_summaries(storage)  # the same study, no second one
+    assert after.study_name == name and after._study_id == before._study_id
+    study = optuna.load_study(study_name=name, storage=storage)
+    done = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    assert len(study.trials) == len(done) == 3, [t.state for t in study.trials]
+    _, _, children = _runs(tmp_path)
+    assert sorted(round(t.value, 6) for t in done) == sorted(round(c.data.metrics["objective"], 6) for c in children)
+
+
+def test_a_fresh_search_does_not_adopt_an_existing_study(tmp_path):
+    import optuna
+
+    optuna.create_study(study_name="search-PointHazard-v0-smoke", storage=f"sqlite:///{tmp_path / 'optuna.db'}")
+    _check_bad_input(tmp_path, ["--space", "search", "--task", "lac/PointHazard-v0", "--budget", "smoke"],
+                     "an Optuna study named 'search-PointHazard-v0-smoke' exists in sqlite:///")
 
 
 @pytest.mark.parametrize("extra,needle", [
@@ -240,7 +324,7 @@ def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, c
     args = _args(tmp_path)
     plan = cli.make_plan(args)
     args.cpus_per_trial = 3
-    assert run_sweep(plan, args, Path(plan["storage"]) / plan["name"], "test-commit") == 2
+    assert run_sweep(plan, args, Path(plan.storage) / plan.name, "test-commit") == 2
     assert "--cpus-per-trial 3 is more than the largest node of the Ray cluster has (2 CPUs)" in capsys.readouterr().err
     assert not (tmp_path / "mlflow.db").exists() or not _runs(tmp_path)[1], "no parent run for a sweep that never ran"
 
@@ -255,7 +339,7 @@ def test_resume_with_other_settings_is_refused(tmp_path, changed, needle):
 
     args = _args(tmp_path)
     plan = cli.make_plan(args)
-    sweep_dir = Path(plan["storage"]) / plan["name"]
+    sweep_dir = Path(plan.storage) / plan.name
     sweep_dir.mkdir(parents=True)
     (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
     base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
@@ -267,12 +351,13 @@ def test_resume_with_other_settings_is_refused(tmp_path, changed, needle):
     assert "Started a local Ray instance" not in proc.stdout + proc.stderr
 
 
+@pytest.mark.slow
 def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monkeypatch):
     import sweeps.sweep as sweep_mod
 
     args = _args(tmp_path)
     plan = cli.make_plan(args)
-    sweep_dir = Path(plan["storage"]) / plan["name"]
+    sweep_dir = Path(plan.storage) / plan.name
 
     def broken(*a, **k):
         raise RuntimeError("Tuner could not be built")
@@ -291,6 +376,7 @@ def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monk
     assert len(children) == 4 and all(c.info.status == "FINISHED" for c in children)
 
 
+@pytest.mark.slow
 def test_asha_early_stops_are_closed_and_called_stopped(ray_session, tmp_path):
     import pandas as pd
 
