@@ -26,8 +26,8 @@ from sweeps.tracking import check_reachable, default_tracking_uri  # noqa: E402
 
 # The plan's estimate, per preset: env steps per second of one trial on 1 CPU without the chain,
 # and chain seconds per env step and per Langevin step (calibration: docs/sweeps.md).
-RATE = {"tiny": 317.0, "safety_gym": 377.0, "mujoco": 185.0}
-CHAIN_S_PER_STEP = {"tiny": 5.3e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
+RATE = {"tiny": 405.0, "safety_gym": 377.0, "mujoco": 185.0}
+CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
 STARTUP_S = 15.0
 
 

@@ -33,9 +33,9 @@ SMOKE = {"smoke": ("langevin_steps", (5, 10), {})}
 # cost ~50x a T = 10 trial's chain: 48 trials do not fit the 35 minutes on 2 cores that a first
 # run gets; --task SafetyPointGoal1-v0 --budget paper runs Table 3 itself.
 QUICK_ABLATION = {
-    "NI": ("langevin_steps", (10, 30), {"langevin_start": "noninformative"}),
+    "NI": ("langevin_steps", (20, 30), {"langevin_start": "noninformative"}),
     "VT": ("langevin_steps", (10, 20, 30), {}),
-    "PR": ("beta", (5.0, 20.0), {}),
+    "PR": ("beta", (0.5, 1.0), {}),
 }
 
 
@@ -75,7 +75,8 @@ BUDGETS: dict[str, Budget] = {
     # 100-step episodes still complete in every 1,000-step iteration.
     # On the paper's tasks 16k steps (64-wide nets, one env so 2k-step iterations complete
     # 1000-step episodes) are a machinery check: the paper's 2.5M cannot be shrunk that far.
-    "quick": Budget({"tiny": (QUICK_TINY_STEPS, {"langevin_fused": True, "num_envs_per_env_runner": 10}),
+    "quick": Budget({"tiny": (QUICK_TINY_STEPS, {"langevin_steps": 20, "langevin_fused": True,
+                                                  "num_envs_per_env_runner": 10}),
                      "*": (16_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
                                     "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
                                     "num_envs_per_env_runner": 1, "langevin_fused": False})},

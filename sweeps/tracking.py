@@ -88,9 +88,11 @@ def ui_links(uri: str, experiment: str, run_id: str | None = None) -> dict[str, 
     A server's UI is at its tracking URI; a local store's at ``mlflow ui``'s default address.
     """
     base = uri.rstrip("/") if uri.startswith(("http://", "https://")) else DEFAULT_UI
-    links = {"runs": f"{base}/#/experiments/{experiment}/runs?workflowType=machine_learning"}
+    # Without the query the UI may open in its GenAI view, whatever the experiment's kind.
+    mode = "?workflowType=machine_learning"
+    links = {"runs": f"{base}/#/experiments/{experiment}/runs{mode}"}
     if run_id:
-        links["run"] = f"{base}/#/experiments/{experiment}/runs/{run_id}"
+        links["run"] = f"{base}/#/experiments/{experiment}/runs/{run_id}{mode}"
     return links
 
 

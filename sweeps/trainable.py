@@ -19,7 +19,7 @@ from ray import tune
 
 from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 from lac_rllib.config import build_config
-from lac_rllib.learner import REPORTED_KEYS
+from lac_rllib.learner import ACTOR_LOSS, CRITIC_LOSS, REPORTED_KEYS
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import (
@@ -104,7 +104,7 @@ class LACTrainable(tune.Trainable):
             learner = r.get("learners", {}).get("default_policy", {})
             metrics = {k: float(r[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
             metrics.update({k: float(learner[k]) for k in REPORTED_KEYS if k in learner})
-            bad = [k for k in ("critic_loss", "actor_loss", NU) if k in metrics and not math.isfinite(metrics[k])]
+            bad = [k for k in (CRITIC_LOSS, ACTOR_LOSS, NU) if k in metrics and not math.isfinite(metrics[k])]
             if bad:
                 raise FloatingPointError(f"non-finite {', '.join(bad)} at iteration {self.iteration + 1}")
             metrics["objective"] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])

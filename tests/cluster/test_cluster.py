@@ -232,7 +232,7 @@ def assert_opens_on_the_results(rest, name, uri, out):
     assert tags.get("mlflow.experimentKind") == "custom_model_development", tags
     parent = next(r for r in rest.runs(name) if r["tags"].get("lac.sweep") == "1")
     runs_link = f"{uri.rstrip('/')}/#/experiments/{exp}/runs?workflowType=machine_learning"
-    run_link = f"{uri.rstrip('/')}/#/experiments/{exp}/runs/{parent['id']}"
+    run_link = f"{uri.rstrip('/')}/#/experiments/{exp}/runs/{parent['id']}?workflowType=machine_learning"
     assert out.count(runs_link) == 2 and out.count(run_link) == 2, out[-3000:]  # at start and at the end
     note = parent["tags"]["mlflow.note.content"]
     assert note.startswith(f"**Sweep `{name}`**: 4 of 4 trials finished"), note

@@ -20,11 +20,11 @@ def test_the_default_ablation_is_what_the_readme_says(tmp_path, monkeypatch):
     plan = _plan(tmp_path, monkeypatch, "--space", "ablation")
     assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 21)
     labels = {t.config_label() for t in plan.trials}
-    assert labels == {f"NI-langevin_steps={t}-PointHazard-v0" for t in (10, 30)} | {
+    assert labels == {f"NI-langevin_steps={t}-PointHazard-v0" for t in (20, 30)} | {
         f"VT-langevin_steps={t}-PointHazard-v0" for t in (10, 20, 30)} | {
-        f"PR-beta={b}-PointHazard-v0" for b in (5.0, 20.0)}
+        f"PR-beta={b}-PointHazard-v0" for b in (0.5, 1.0)}
     defaults = [t.label() for t in plan.trials if t.default]
-    assert defaults == [f"VT-langevin_steps=10-PointHazard-v0-s{s}" for s in range(3)]
+    assert defaults == [f"VT-langevin_steps=20-PointHazard-v0-s{s}" for s in range(3)]
     minutes = int(re.search(r"(\d+) trials, ~(\d+) min on 2 cores", FIRST_SCREEN).group(2))
     assert f"{plan.task}, {plan.n_trials} trials" in FIRST_SCREEN
     assert plan.estimated_wall_s / 60 <= minutes <= 35, (plan.estimated_wall_s / 60, minutes)

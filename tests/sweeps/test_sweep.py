@@ -55,7 +55,8 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
     exp = client.get_experiment_by_name("test")
     assert exp.tags["mlflow.experimentKind"] == "custom_model_development"
     links = (f"http://127.0.0.1:5000/#/experiments/{exp.experiment_id}/runs?workflowType=machine_learning",
-             f"http://127.0.0.1:5000/#/experiments/{exp.experiment_id}/runs/{parent.info.run_id}")
+             f"http://127.0.0.1:5000/#/experiments/{exp.experiment_id}/runs/{parent.info.run_id}"
+             "?workflowType=machine_learning")
     assert all(out.count(link) == 2 for link in links), out[-3000:]
     note = parent.data.tags["mlflow.note.content"]
     assert note.startswith("**Sweep `smoke-PointHazard-v0-smoke`**: 4 of 4 trials finished"), note
