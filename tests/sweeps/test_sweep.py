@@ -267,8 +267,11 @@ def test_a_fresh_search_does_not_adopt_an_existing_study(tmp_path):
     import optuna
 
     optuna.create_study(study_name="search-PointHazard-v0-smoke", storage=f"sqlite:///{tmp_path / 'optuna.db'}")
-    _check_bad_input(tmp_path, ["--space", "search", "--task", "lac/PointHazard-v0", "--budget", "smoke"],
-                     "an Optuna study named 'search-PointHazard-v0-smoke' exists in sqlite:///")
+    args = cli.parse_args(["--space", "search", "--task", "lac/PointHazard-v0", "--budget", "smoke",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")])
+    with pytest.raises(ValueError, match="an Optuna study named 'search-PointHazard-v0-smoke' exists in sqlite:///"):
+        cli.make_plan(args)  # before Ray: main() prints it and exits 2, like every bad input
+    assert not (tmp_path / "rr" / "search-PointHazard-v0-smoke").exists()
 
 
 @pytest.mark.parametrize("extra,needle", [
@@ -285,15 +288,30 @@ def test_a_fresh_search_does_not_adopt_an_existing_study(tmp_path):
     (["--storage", "/proc/x/tune"], "--storage /proc/x/tune is not a writable directory"),
     (["--set", "no_such_field=1"], "unknown LAC config field 'no_such_field'"),
 ])
-def test_bad_inputs_fail_before_ray(tmp_path, extra, needle):
-    _check_bad_input(tmp_path, extra, needle)
+def test_bad_inputs_fail_before_ray(tmp_path, extra, needle, monkeypatch, capsys):
+    _check_bad_input(tmp_path, extra, needle, monkeypatch, capsys)
 
 
-def _check_bad_input(tmp_path, extra, needle):
-    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", *extra]
+def _check_bad_input(tmp_path, extra, needle, monkeypatch, capsys):
+    """The CLI's main() in this process (a subprocess per case cost ~8 s of imports each): exit
+    code 2, the message, and neither Ray nor a sweep directory started."""
+    import ray
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(ray, "init", lambda *a, **k: pytest.fail("Ray was started for a bad input"))
+    try:
+        rc = cli.main(["--space", "smoke", *extra])
+    except SystemExit as e:  # argparse's own errors
+        rc = e.code
+    err = capsys.readouterr().err
+    assert rc == 2 and all(n in err for n in ((needle,) if isinstance(needle, str) else needle)), err
+    assert "--resume" in extra or not (tmp_path / "ray_results").exists()
+
+
+def test_a_bad_input_fails_before_ray_as_a_command(tmp_path):
+    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", "--set", "no_such_field=1"]
     proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2
-    assert needle in proc.stderr
+    assert proc.returncode == 2 and "unknown LAC config field 'no_such_field'" in proc.stderr
     assert "Started a local Ray instance" not in proc.stdout + proc.stderr
     assert not (tmp_path / "ray_results").exists()
 
@@ -335,7 +353,7 @@ def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, c
     (["--seeds", "3"], "--seeds=2 (now 3)"),
     (["--tracking-uri", "sqlite:///elsewhere.db"], "tracking_uri="),
 ])
-def test_resume_with_other_settings_is_refused(tmp_path, changed, needle):
+def test_resume_with_other_settings_is_refused(tmp_path, changed, needle, monkeypatch, capsys):
     from sweeps.record import SWEEP_FILE, sweep_record
 
     args = _args(tmp_path)
@@ -345,11 +363,8 @@ def test_resume_with_other_settings_is_refused(tmp_path, changed, needle):
     (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
     base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
-    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), *base, *changed, "--resume"]
-    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2, proc.stderr
-    assert "was started with other settings" in proc.stderr and needle in proc.stderr
-    assert "Started a local Ray instance" not in proc.stdout + proc.stderr
+    _check_bad_input(tmp_path, [*base, *changed, "--resume"], ("was started with other settings", needle),
+                     monkeypatch, capsys)
 
 
 @pytest.mark.slow
@@ -400,11 +415,12 @@ def test_asha_early_stops_are_closed_and_called_stopped(ray_session, tmp_path):
     (["--tracking-uri", "http://127.0.0.1:{port}", "--storage", "relative/dir"],
      "--storage relative/dir with --address: a relative path is a different directory on every node"),
 ])
-def test_cluster_inputs_must_be_shared(tmp_path, extra, needle):
+def test_cluster_inputs_must_be_shared(tmp_path, extra, needle, monkeypatch, capsys):
     import socket
 
     with socket.socket() as server:  # something listening, so --address passes its reachability check
         server.bind(("127.0.0.1", 0))
         server.listen()
         port = server.getsockname()[1]
-        _check_bad_input(tmp_path, ["--address", f"127.0.0.1:{port}", *[x.format(port=port) for x in extra]], needle)
+        _check_bad_input(tmp_path, ["--address", f"127.0.0.1:{port}", *[x.format(port=port) for x in extra]], needle,
+                         monkeypatch, capsys)
