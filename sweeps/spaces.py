@@ -122,10 +122,6 @@ class TrialSpec:
     def label(self) -> str:
         return f"{self.config_label()}-s{self.seed}"
 
-    def swept(self) -> dict:
-        """What this trial sets on top of the budget's configuration: the grid point, or the sample."""
-        return self.sampled if self.sampled is not None else {self.param: self.value} if self.param else {}
-
 
 def config_id(task: str, timesteps: int, params: dict) -> str:
     """A stable id of a configuration without its seed: what it learns with (task, budget, every
