@@ -19,6 +19,7 @@ from ray.rllib.algorithms.algorithm import Algorithm
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.execution.rollout_ops import synchronous_parallel_sample
 from ray.rllib.utils.annotations import override
+from ray.rllib.utils.debug import update_global_seed_if_necessary
 from ray.rllib.utils.metrics import (
     ENV_RUNNER_RESULTS,
     LEARNER_RESULTS,
@@ -40,6 +41,12 @@ EPISODES_THIS_ITER, ENV_STEPS = "episodes_this_iter", "env_steps"
 CHECKPOINT_FORMAT = 1
 #: Key of the replay buffer in the algorithm's checkpointed state (config.store_replay_buffer).
 REPLAY_BUFFER = "lac_replay_buffer"
+
+
+def resume_seed(seed: int, iteration: int) -> int:
+    """The seed of a run restored at ``iteration`` (see LAC._reseed_for_restore): a hash of both,
+    below 2**31 with room for RLlib's + worker index, so (seed, iteration) pairs do not share streams."""
+    return int(np.random.SeedSequence([seed, iteration]).generate_state(1)[0]) % (2**31 - 2**16)
 
 
 def make_task_env(env_config, task_id: str):
@@ -97,6 +104,37 @@ class LAC(Algorithm):
         super().set_state(state)
         if REPLAY_BUFFER in state:
             self.replay_buffer.set_state(state[REPLAY_BUFFER])
+
+    @override(Algorithm)
+    def restore_from_path(self, path, *args, **kwargs) -> None:
+        super().restore_from_path(path, *args, **kwargs)
+        self._reseed_for_restore()
+
+    def _reseed_for_restore(self) -> None:
+        """Fresh random streams for a run restored at iteration k.
+
+        RLlib's checkpoints hold no RNG state: a restored run (``lac-train --resume``, a Tune
+        trial restored after a failure or ``sweeps/run.py --resume``) seeds its envs, action
+        sampling and torch/numpy as at iteration 0, so its next iteration replays iteration 1's
+        random stream: the same env layouts and, in the random phase, the very same transitions
+        added to the buffer a second time. Seeding from (seed, k) instead keeps a restored run
+        reproducible without repeating data. The streams differ from those of an uninterrupted
+        run (which continues its own), so a resumed run is a different draw of the same seed
+        (docs/dependencies.md, "Checkpoints and random streams").
+        """
+        if self.config.seed is None:
+            return
+        seed = resume_seed(self.config.seed, self.iteration)
+
+        def reseed(runner) -> None:
+            # RLlib's SingleAgentEnvRunner seeds its envs with ``_seed`` at its initial reset
+            # (and every runner gets seed + worker index, as at construction).
+            runner._seed = seed + (runner.worker_index or 0)
+            runner._needs_initial_reset = True
+            update_global_seed_if_necessary(runner.config.framework_str, runner._seed)
+
+        self.env_runner_group.foreach_env_runner(reseed, local_env_runner=True)
+        self.learner_group.foreach_learner(lambda learner: update_global_seed_if_necessary("torch", seed))
 
     @override(Algorithm)
     def training_step(self) -> None:
