@@ -24,7 +24,9 @@ Configurations, each built fresh on the same task, seed and buffer contents:
   Safety-Gymnasium resets (env_config ``light_resets=False``);
 - ``current``: the defaults (the preset's vector env, fused chain).
 ``--variant NAME:field=value,...`` adds others (e.g. ``bf16:langevin_dtype=bfloat16``).
-Prints a table with each phase's ratio baseline / current and writes it to ``--out``.
+Prints a table with each phase's ratio baseline / current and writes it to ``--out``, then the
+float32 matmul floor of the current iteration's chains, timed in the same run, and the ratio an
+iteration would reach with the chain exactly at that floor (the ceiling of float32 on this CPU).
 """
 
 from __future__ import annotations
@@ -99,8 +101,39 @@ def _warm_up_chain(algo, config) -> None:
         module.langevin(obs, mean, log_std)
 
 
+def chain_matmul_floor_s(critics, calls: list[tuple[int, int]], repeats: int = 3) -> float:
+    """Seconds the chains' dense matmuls alone take in float32: per step, each hidden-to-hidden
+    layer's batched (E, B, H)×(E, H, H) once forward and once backward, plus one forward for the
+    final energy; ``calls`` are the chains run, as (batch, steps). The floor of the chain's form:
+    no element-wise work, no overhead (benchmarks/langevin.py measures the same per chain)."""
+    import torch
+
+    shapes = [tuple(w.shape) for w in list(critics.weights)[1:-1]]  # (E, H_in, H_out)
+    total = 0.0
+    for (batch, steps), n in _count(calls).items():
+        xs = [torch.randn(e, batch, h_in) for e, h_in, _ in shapes]
+        ws = [torch.randn(*shape) for shape in shapes]
+        best = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            for _ in range(2 * steps + 1):
+                for x, w in zip(xs, ws):
+                    torch.bmm(x, w)
+            best = min(best, time.perf_counter() - t0)
+        total += n * best
+    return total
+
+
+def _count(items: list) -> dict:
+    counts: dict = {}
+    for item in items:
+        counts[item] = counts.get(item, 0) + 1
+    return counts
+
+
 def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict | None = None) -> dict[str, float]:
-    """Seconds per phase of one ``algo.train()`` with ``sets`` on top of the defaults."""
+    """Seconds per phase of one ``algo.train()`` with ``sets`` on top of the defaults, and
+    ``chain floor``: the float32 matmul floor of the same chains (:func:`chain_matmul_floor_s`)."""
     import lac_rllib.module as module_mod
     from lac_rllib.config import build_config
 
@@ -126,16 +159,27 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
             env.step, env.reset = clock.wrap("env", env.step), clock.wrap("env", env.reset)
         algo.env_runner.sample = clock.wrap("sampling", algo.env_runner.sample)
         algo.learner_group.update = clock.wrap("learner", algo.learner_group.update)
-        module_mod.langevin_chain = clock.wrap("chain", original_chain)
+        calls = []
+
+        def chain(critics, obs, *args, steps, **kwargs):
+            calls.append((obs.shape[0], steps))
+            return original_chain(critics, obs, *args, steps=steps, **kwargs)
+
+        module_mod.langevin_chain = clock.wrap("chain", chain)
         t0 = time.perf_counter()
         algo.train()
         total = time.perf_counter() - t0
+        module_mod.langevin_chain = original_chain
+        from ray.rllib.core import DEFAULT_MODULE_ID
+
+        floor = chain_matmul_floor_s(algo.learner_group._learner.module[DEFAULT_MODULE_ID].critics, calls)
     finally:
         module_mod.langevin_chain = original_chain
         algo.stop()
     s = clock.seconds
     return {"env": s["env"], "sampling machinery": s["sampling"] - s["env"], "chain": s["chain"],
-            "update": s["learner"] - s["chain"], "other": total - s["sampling"] - s["learner"], "total": total}
+            "update": s["learner"] - s["chain"], "other": total - s["sampling"] - s["learner"], "total": total,
+            "chain floor": floor, "chains": len(calls)}
 
 
 def table(task: str, results: dict[str, dict[str, float]]) -> str:
@@ -147,6 +191,13 @@ def table(task: str, results: dict[str, dict[str, float]]) -> str:
         now = results["current"][phase]
         ratio = results["baseline"][phase] / now if now > 0 else float("nan")
         lines.append(f"| {phase} | " + " | ".join(f"{v:.1f}" for v in vals) + f" | {ratio:.2f}x |")
+    cur, base = results["current"], results["baseline"]
+    at_floor = cur["total"] - cur["chain"] + cur["chain floor"]
+    lines += ["", f"Chains in the iteration: {cur['chains']}; their float32 matmul floor (the dense matmuls "
+              f"alone, same run): {cur['chain floor']:.1f} s, the current chain at "
+              f"{100 * cur['chain floor'] / cur['chain']:.0f}% of it. With the chain exactly at that floor and "
+              f"every other phase as measured, an iteration would take {at_floor:.1f} s: at most "
+              f"{base['total'] / at_floor:.2f}x the baseline in float32 on this CPU."]
     return "\n".join(lines)
 
 
@@ -186,7 +237,8 @@ def main(argv=None) -> int:
         for name, sets in variants.items():
             results[name] = time_iteration(task, sets, args.seed, prefill,
                                            BASELINE_ENV_CONFIG if name == "baseline" else None)
-            print(f"{task} {name}: " + ", ".join(f"{k} {v:.1f}s" for k, v in results[name].items()), flush=True)
+            print(f"{task} {name}: " + ", ".join(f"{k} {v:.1f}s" for k, v in results[name].items()
+                                                 if k in PHASES), flush=True)
         text = table(task, results)
         print("\n" + text + "\n", flush=True)
         out += [text, ""]
