@@ -128,8 +128,10 @@ def run_sweep(plan: Plan, args, sweep_dir: Path, commit: str) -> int:
     previous = json.loads(state_file.read_text()) if args.resume else {}
     parent = tracker.start(
         plan.name,
-        params={k: v for k, v in vars(args).items()} | {"n_trials": plan.n_trials, "timesteps": plan.timesteps,
-                                                        "git_commit": commit, **versions()},
+        # "task" as resolved (the CLI's is None for a space's default task).
+        params={k: v for k, v in vars(args).items()} | {"task": plan.task, "n_trials": plan.n_trials,
+                                                        "timesteps": plan.timesteps, "git_commit": commit,
+                                                        **versions()},
         tags={"lac.space": plan.space, "lac.budget": plan.budget, "lac.sweep_name": plan.name},
         run_id=previous.get("parent_run_id"),
     )

@@ -70,6 +70,7 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
     assert "progress: 4/4 trials done · 0 running · ETA ~0 min (mean" in out, out[-3000:]
     assert "...iteration" not in out
     assert {"ray", "torch", "mujoco", "numpy", "git_commit", "space", "seeds"} <= set(parent.data.params)
+    assert parent.data.params["task"] == "lac/PointHazard-v0"  # resolved, not the CLI's None
     summary = {a.path for a in client.list_artifacts(parent.info.run_id, "summary")}
     assert {"summary/summary.csv", "summary/summary.md", "summary/best.json", "summary/cost_boxplots.png",
             "summary/learning_curves.png", "summary/aggregates.png"} <= summary
