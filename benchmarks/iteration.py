@@ -32,6 +32,7 @@ iteration would reach with the chain exactly at that floor (the ceiling of float
 from __future__ import annotations
 
 import argparse
+import collections
 import copy
 import functools
 import sys
@@ -110,7 +111,7 @@ def chain_matmul_floor_s(critics, calls: list[tuple[int, int]], repeats: int = 3
 
     shapes = [tuple(w.shape) for w in list(critics.weights)[1:-1]]  # (E, H_in, H_out)
     total = 0.0
-    for (batch, steps), n in _count(calls).items():
+    for (batch, steps), n in collections.Counter(calls).items():
         xs = [torch.randn(e, batch, h_in) for e, h_in, _ in shapes]
         ws = [torch.randn(*shape) for shape in shapes]
         best = float("inf")
@@ -122,13 +123,6 @@ def chain_matmul_floor_s(critics, calls: list[tuple[int, int]], repeats: int = 3
             best = min(best, time.perf_counter() - t0)
         total += n * best
     return total
-
-
-def _count(items: list) -> dict:
-    counts: dict = {}
-    for item in items:
-        counts[item] = counts.get(item, 0) + 1
-    return counts
 
 
 def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict | None = None) -> dict[str, float]:
@@ -169,7 +163,6 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
         t0 = time.perf_counter()
         algo.train()
         total = time.perf_counter() - t0
-        module_mod.langevin_chain = original_chain
         from ray.rllib.core import DEFAULT_MODULE_ID
 
         floor = chain_matmul_floor_s(algo.learner_group._learner.module[DEFAULT_MODULE_ID].critics, calls)
