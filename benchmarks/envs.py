@@ -95,7 +95,7 @@ def bench_sampling(task_ids: list[str] | None = None, steps: int = 3000, seed: i
     import ray
     import torch
 
-    from lac_rllib.config import LACConfig
+    from lac_rllib.algorithms.lac.config import LACConfig
 
     torch.set_num_threads(1)
     if not ray.is_initialized():
@@ -125,7 +125,7 @@ def bench_sampling(task_ids: list[str] | None = None, steps: int = 3000, seed: i
 
 
 def _sampling_steps_per_s(task_id: str, steps: int, seed: int, warmup: int, num_envs: int):
-    from lac_rllib.config import LACConfig
+    from lac_rllib.algorithms.lac.config import LACConfig
 
     config = (LACConfig().task(task_id).training(total_env_steps=steps, num_envs_per_env_runner=num_envs)
               .debugging(seed=seed).env_runners(num_env_runners=0))

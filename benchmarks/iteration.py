@@ -75,7 +75,7 @@ def _sub_envs(runner):
 
 def prefill_episodes(task: str, seed: int):
     """One iteration of random-action episodes at the preset (copied to fill the buffer)."""
-    from lac_rllib.config import build_config
+    from lac_rllib.algorithms.lac.config import build_config
 
     config = build_config(task, seed, {"num_envs_per_env_runner": 1}, timesteps=10**9)
     algo = config.build_algo()
@@ -128,8 +128,8 @@ def chain_matmul_floor_s(critics, calls: list[tuple[int, int]], repeats: int = 3
 def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict | None = None) -> dict[str, float]:
     """Seconds per phase of one ``algo.train()`` with ``sets`` on top of the defaults, and
     ``chain floor``: the float32 matmul floor of the same chains (:func:`chain_matmul_floor_s`)."""
-    import lac_rllib.module as module_mod
-    from lac_rllib.config import build_config
+    import lac_rllib.algorithms.lac.module as module_mod
+    from lac_rllib.algorithms.lac.config import build_config
 
     episodes, runner_state, capacity, per_iteration = prefill
     sets = {"random_iterations": 0, "actor_update_start_iteration": 0, **sets}

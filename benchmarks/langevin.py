@@ -31,8 +31,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
-from lac_rllib.langevin import langevin_chain, naive_langevin_chain  # noqa: E402
-from lac_rllib.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows  # noqa: E402
+from lac_rllib.algorithms.lac.langevin import langevin_chain, naive_langevin_chain  # noqa: E402
+from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows  # noqa: E402
 
 TASK_DIMS = {"PointGoal1": (60, 2), "Humanoid": (376, 17)}
 CHAIN = dict(steps=30, step_size=1e-4, temperature=1e-3, nu=0.5)
@@ -161,11 +161,11 @@ def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
     from ray.rllib.core.columns import Columns
     from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 
-    from lac_rllib import module as M
-    from lac_rllib.config import LACConfig
-    from lac_rllib.connectors import COSTS
-    from lac_rllib.learner import critic_targets
-    from lac_rllib.networks import gaussian_kl, gaussian_log_prob
+    from lac_rllib.algorithms.lac import module as M
+    from lac_rllib.algorithms.lac.config import LACConfig
+    from lac_rllib.constrained.costs import COSTS
+    from lac_rllib.algorithms.lac.learner import critic_targets
+    from lac_rllib.algorithms.lac.networks import gaussian_kl, gaussian_log_prob
 
     obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
     act_space = gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32)

@@ -30,7 +30,7 @@ def main() -> None:
 
     import ray
 
-    from lac_rllib.config import build_config
+    from lac_rllib.algorithms.lac.config import build_config
     from lac_rllib.train import train
     from sweeps import run as cli
     from sweeps import spaces

@@ -12,7 +12,7 @@ import inspect
 import re
 import sys
 
-from lac_rllib.config import FIELD_RANGES, PRESETS, LACParams, field_docs
+from lac_rllib.algorithms.lac.config import FIELD_RANGES, PRESETS, LACParams, field_docs
 from lac_rllib.tasks import get_task, known_tasks
 
 REGENERATE = "python -m lac_rllib.config_doc > docs/config.md"

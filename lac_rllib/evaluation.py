@@ -396,7 +396,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
     from ray.rllib.core.columns import Columns
     from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
-    from lac_rllib.connectors import step_cost
+    from lac_rllib.constrained.costs import step_cost
     from lac_rllib.tasks import get_task
 
     if actions not in ACTION_MODES:

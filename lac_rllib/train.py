@@ -17,7 +17,7 @@ import shutil
 import sys
 import time
 
-from lac_rllib.config import (
+from lac_rllib.algorithms.lac.config import (
     FIELD_NAMES,
     FIELD_RANGES,
     LEGACY_VALUES,
@@ -115,8 +115,8 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print, checkpoi
     """
     from ray.rllib.core import DEFAULT_MODULE_ID
 
-    from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
-    from lac_rllib.learner import REPORTED_KEYS
+    from lac_rllib.algorithms.lac.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+    from lac_rllib.algorithms.lac.learner import REPORTED_KEYS
     from lac_rllib.tasks.versions import runtime_versions
 
     os.makedirs(output, exist_ok=True)

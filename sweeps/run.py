@@ -116,7 +116,7 @@ def make_plan(args) -> Plan:
         v = getattr(args, flag)
         if v is not None and v < 1:
             raise ValueError(f"--{flag.replace('_', '-')} {v} is invalid; accepted: an integer >= 1")
-    from lac_rllib.config import check_field
+    from lac_rllib.algorithms.lac.config import check_field
     from lac_rllib.train import parse_sets
 
     sets = parse_sets(args.set)  # unknown fields list the accepted ones
@@ -188,7 +188,7 @@ def check_optuna_study(url: str, name: str, resume: bool) -> None:
 def estimate_trial_s(budget, task: str, overrides: dict, cpus: int) -> float:
     """Rough wall seconds of one trial: start-up, then env steps at the preset's measured rate,
     plus the chain's share, which grows with T (measured on this project's 2-core machine)."""
-    from lac_rllib.config import PRESETS, LACParams
+    from lac_rllib.algorithms.lac.config import PRESETS, LACParams
     from lac_rllib.tasks import get_task
 
     preset = get_task(task).preset

@@ -42,7 +42,7 @@ QUICK_ABLATION = {
 @dataclasses.dataclass(frozen=True)
 class Budget:
     """Env steps per trial and the LAC overrides that make that budget meaningful, per task preset
-    (``lac_rllib.config.PRESETS``; ``"*"`` for any other preset)."""
+    (``lac_rllib.algorithms.lac.config.PRESETS``; ``"*"`` for any other preset)."""
 
     by_preset: dict
     doc: str
@@ -129,7 +129,7 @@ def config_id(task: str, timesteps: int, params: dict) -> str:
     import hashlib
     import json
 
-    from lac_rllib.config import SPEED_FIELDS
+    from lac_rllib.algorithms.lac.config import SPEED_FIELDS
 
     what = {"task": task, "timesteps": int(timesteps), **{k: v for k, v in params.items() if k not in SPEED_FIELDS}}
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:12]
@@ -207,7 +207,7 @@ def grid(space: str, task: str | None, seeds: int, budget: str = "paper") -> lis
 def mark_defaults(trials: list[TrialSpec], budget: str, sets: dict) -> list[TrialSpec]:
     """Flag the trials whose overrides change nothing: they run LAC's defaults (at this budget,
     with the user's --set), the baseline every configuration is compared with."""
-    from lac_rllib.config import build_config
+    from lac_rllib.algorithms.lac.config import build_config
 
     base, out = {}, []
     for t in trials:

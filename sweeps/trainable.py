@@ -17,9 +17,9 @@ import traceback
 import ray
 from ray import tune
 
-from lac_rllib.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
-from lac_rllib.config import build_config
-from lac_rllib.learner import ACTOR_LOSS, CRITIC_LOSS, REPORTED_KEYS
+from lac_rllib.algorithms.lac.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+from lac_rllib.algorithms.lac.config import build_config
+from lac_rllib.algorithms.lac.learner import ACTOR_LOSS, CRITIC_LOSS, REPORTED_KEYS
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import (

@@ -30,7 +30,7 @@ def one_torch_thread():
 
 def tiny_config(task="lac/PointHazard-v0", seed=0, **overrides):
     """A LACConfig on a built-in task, sized for tests (lr decay over 10k steps unless given)."""
-    from lac_rllib.config import LACConfig
+    from lac_rllib.algorithms.lac.config import LACConfig
 
     overrides = {"total_env_steps": 10_000, **overrides}
     return LACConfig().task(task).training(**overrides).debugging(seed=seed)
@@ -54,7 +54,7 @@ def train_batch(algo) -> dict:
 @pytest.fixture(scope="session")
 def checkpoint(ray_session, tmp_path_factory):
     """One tiny PointHazard checkpoint per session (lac-train's layout), for restore/evaluation tests."""
-    from lac_rllib.config import build_config
+    from lac_rllib.algorithms.lac.config import build_config
     from lac_rllib.train import train
 
     out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from lac_rllib.config import LACParams
+from lac_rllib.algorithms.lac.config import LACParams
 from lac_rllib.config_doc import REGENERATE, config_markdown
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from lac_rllib.config import build_config
-from lac_rllib.learner import LANGEVIN_AT_BOUND
+from lac_rllib.algorithms.lac.config import build_config
+from lac_rllib.algorithms.lac.learner import LANGEVIN_AT_BOUND
 from lac_rllib.train import CONFIG, PROGRESS, check_output, run_config, train
 
 TINY = ["--set", "env_steps_per_iteration=500", "--set", "replay_capacity=2000", "--set", "random_iterations=1"]

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
-from lac_rllib.learner import CHAIN_HEALTH_KEYS
+from lac_rllib.algorithms.lac.learner import CHAIN_HEALTH_KEYS
 from sweeps import run as cli
 from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
 from sweeps.trainable import objective

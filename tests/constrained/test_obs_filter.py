@@ -4,7 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from lac_rllib.obs_filter import FlooredMeanStdFilter
+from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 
 
 def _normalised_last(std_floor: float):

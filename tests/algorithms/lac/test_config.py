@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from lac_rllib.config import FIELD_NAMES, FIELD_RANGES, LACConfig, LACParams, check_field, field_docs
+from lac_rllib.algorithms.lac.config import FIELD_NAMES, FIELD_RANGES, LACConfig, LACParams, check_field, field_docs
 
 
 @pytest.mark.parametrize("field,value,accepted", [

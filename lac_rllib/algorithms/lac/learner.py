@@ -28,9 +28,9 @@ from ray.rllib.core.learner.utils import update_target_network
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.annotations import override
 
-from lac_rllib import module as M
-from lac_rllib.connectors import COSTS, AddCostsFromInfos, ShuffleRows
-from lac_rllib.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
+from lac_rllib.algorithms.lac import module as M
+from lac_rllib.constrained.costs import COSTS, AddCostsFromInfos, ShuffleRows
+from lac_rllib.algorithms.lac.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
 
 CRITIC, ACTOR = "critic", "actor"  # optimizer names, one per loss
 

@@ -1,4 +1,4 @@
-"""The fused chain step (lac_rllib.fused_energy): the compiled step equals the eager chain, the
+"""The fused chain step (lac_rllib.algorithms.lac.fused_energy): the compiled step equals the eager chain, the
 bfloat16 matmuls move end points by far less than the chain's own noise, and a failed compile
 falls back to the exact eager path."""
 
@@ -8,9 +8,9 @@ import math
 import pytest
 import torch
 
-from lac_rllib import fused_energy
-from lac_rllib.langevin import langevin_chain
-from lac_rllib.networks import CriticEnsemble, GaussianActor
+from lac_rllib.algorithms.lac import fused_energy
+from lac_rllib.algorithms.lac.langevin import langevin_chain
+from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
 ETA = 1e-4
 

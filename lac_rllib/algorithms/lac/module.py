@@ -23,9 +23,9 @@ from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.config import LEGACY_VALUES
-from lac_rllib.langevin import ChainResult, langevin_chain
-from lac_rllib.networks import CriticEnsemble, GaussianActor
+from lac_rllib.algorithms.lac.config import LEGACY_VALUES
+from lac_rllib.algorithms.lac.langevin import ChainResult, langevin_chain
+from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
 # Keys of the forward_train output, declared once.
 Q_PRED = "q_pred"  # (E, B) online Q(s, a), rows [:n_reward] reward critics

@@ -22,7 +22,7 @@ import math
 
 import torch
 
-from lac_rllib.networks import cost_rows, reward_rows
+from lac_rllib.algorithms.lac.networks import cost_rows, reward_rows
 
 DTYPES = ("float32", "bfloat16")
 _TORCH_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}

@@ -18,10 +18,10 @@ from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.fused_energy import DTYPES as LANGEVIN_DTYPES
-from lac_rllib.langevin import CLIP_MODES, INFORMATIVE, STARTS
-from lac_rllib.networks import ACTIVATIONS
-from lac_rllib.obs_filter import FlooredMeanStdFilter
+from lac_rllib.algorithms.lac.fused_energy import DTYPES as LANGEVIN_DTYPES
+from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
+from lac_rllib.algorithms.lac.networks import ACTIVATIONS
+from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
 
 CHAIN_AT = ("next", "current")
@@ -259,14 +259,14 @@ def check_field(name: str, value: Any) -> None:
 
 
 class LACConfig(AlgorithmConfig):
-    """Config for :class:`lac_rllib.algorithm.LAC`. See :class:`LACParams` for the fields.
+    """Config for :class:`lac_rllib.algorithms.lac.algorithm.LAC`. See :class:`LACParams` for the fields.
 
     ``LACConfig().task("SafetyPointGoal1-v0")`` sets the env, its cost convention and the
     task's preset (docs/spec.md §5, Tables 4-5); explicit ``training(...)`` values win over presets.
     """
 
     def __init__(self, algo_class=None):
-        from lac_rllib.algorithm import LAC
+        from lac_rllib.algorithms.lac.algorithm import LAC
 
         super().__init__(algo_class=algo_class or LAC)
         for f in dataclasses.fields(LACParams):
@@ -285,7 +285,7 @@ class LACConfig(AlgorithmConfig):
         # ~700 steps/s already do), leaving the iteration short of data. A dead runner is found
         # by RLlib's fault tolerance, not by this timeout.
         self.sample_timeout_s = None
-        from lac_rllib.connectors import EpisodeCostCallback
+        from lac_rllib.constrained.costs import EpisodeCostCallback
 
         self.callbacks_class = EpisodeCostCallback
 
@@ -312,7 +312,7 @@ class LACConfig(AlgorithmConfig):
             raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(PRESETS)}")
         self.task_id, self.preset_name = task_id, name
         self.training(**{**PRESETS[name], **spec.overrides})
-        from lac_rllib.algorithm import register_task_env
+        from lac_rllib.algorithms.lac.algorithm import register_task_env
 
         register_task_env(task_id)
         self.environment(env=task_id)
@@ -382,13 +382,13 @@ class LACConfig(AlgorithmConfig):
 
     @override(AlgorithmConfig)
     def get_default_rl_module_spec(self) -> RLModuleSpec:
-        from lac_rllib.module import LACTorchRLModule
+        from lac_rllib.algorithms.lac.module import LACTorchRLModule
 
         return RLModuleSpec(module_class=LACTorchRLModule)
 
     @override(AlgorithmConfig)
     def get_default_learner_class(self):
-        from lac_rllib.learner import LACTorchLearner
+        from lac_rllib.algorithms.lac.learner import LACTorchLearner
 
         return LACTorchLearner
 

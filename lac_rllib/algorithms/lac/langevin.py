@@ -25,8 +25,8 @@ from typing import Callable
 
 import torch
 
-from lac_rllib.fused_energy import make_grad_fn
-from lac_rllib.networks import CriticEnsemble, cost_rows, reward_rows
+from lac_rllib.algorithms.lac.fused_energy import make_grad_fn
+from lac_rllib.algorithms.lac.networks import CriticEnsemble, cost_rows, reward_rows
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
 # Where a chain starts (the ``langevin_start`` field): ã_0 ~ π_φ'(·|s) (eq. 11), or N(0, I) (NI).
@@ -170,7 +170,7 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
 
     ``noise`` (optional, for reproducible comparisons) is (T+1, B, A): ``noise[0]`` is z₀ of the
     start, ``noise[1:]`` the step noise; otherwise all noise is drawn from ``generator``.
-    ``fused``: each step's energy gradient through torch.compile (lac_rllib.fused_energy);
+    ``fused``: each step's energy gradient through torch.compile (lac_rllib.algorithms.lac.fused_energy);
     ``dtype``: the critics' matmuls in "float32" or "bfloat16" (the action stays float32).
     """
     _check_chain_args(steps, step_size, grad_clip, grad_clip_mode)
