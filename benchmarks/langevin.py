@@ -163,9 +163,9 @@ def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
 
     from lac_rllib.algorithms.lac import module as M
     from lac_rllib.algorithms.lac.config import LACConfig
-    from lac_rllib.constrained.costs import COSTS
     from lac_rllib.algorithms.lac.learner import critic_targets
     from lac_rllib.algorithms.lac.networks import gaussian_kl, gaussian_log_prob
+    from lac_rllib.constrained.costs import COSTS
 
     obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
     act_space = gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32)

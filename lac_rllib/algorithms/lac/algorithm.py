@@ -29,8 +29,8 @@ from ray.rllib.utils.replay_buffers.episode_replay_buffer import EpisodeReplayBu
 from ray.tune.registry import register_env
 
 from lac_rllib.algorithms.lac.config import LACConfig
-from lac_rllib.constrained.costs import completed_episode_stats
 from lac_rllib.algorithms.lac.learner import NU, TS_EPISODE_COST, TS_ITERATION
+from lac_rllib.constrained.costs import completed_episode_stats
 from lac_rllib.tasks import get_task
 
 # Top-level result keys, declared once (the sweep service and the trainer read these).

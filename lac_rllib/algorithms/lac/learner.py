@@ -29,8 +29,8 @@ from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac import module as M
-from lac_rllib.constrained.costs import COSTS, AddCostsFromInfos, ShuffleRows
 from lac_rllib.algorithms.lac.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
+from lac_rllib.constrained.costs import COSTS, AddCostsFromInfos, ShuffleRows
 
 CRITIC, ACTOR = "critic", "actor"  # optimizer names, one per loss
 

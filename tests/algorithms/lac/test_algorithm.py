@@ -10,8 +10,8 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, LEARNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from lac_rllib.algorithms.lac.algorithm import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, LAC
-from lac_rllib.constrained.costs import COSTS
 from lac_rllib.algorithms.lac.learner import NU, NU_MAX, TARGET_COST_MEAN, TARGET_REWARD_MEAN, TS_EPISODE_COST
+from lac_rllib.constrained.costs import COSTS
 
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 

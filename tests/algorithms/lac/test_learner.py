@@ -6,8 +6,8 @@ import pytest
 import torch
 from ray.rllib.core.columns import Columns
 
-from lac_rllib.constrained.costs import COSTS
 from lac_rllib.algorithms.lac.learner import LACTorchLearner, critic_targets
+from lac_rllib.constrained.costs import COSTS
 
 
 def _cfg(**kw):
