@@ -62,7 +62,7 @@ RAY_STARTUP_S = 120  # a run is niced this long after its start (its Ray is up b
 
 def parse_variant(text: str) -> tuple[str, list[str]]:
     """``"old:a=1,b=None"`` → ("old", ["a=1", "b=None"]); the sets are checked by lac-train's parser."""
-    from lac_rllib.train import parse_sets
+    from lac_rllib.algorithms.lac.config import parse_sets
 
     name, _, sets = text.partition(":")
     pairs = [p.strip() for p in sets.split(",") if p.strip()]
@@ -246,8 +246,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     try:
+        from lac_rllib.algorithms.lac.config import parse_sets
         from lac_rllib.tasks import get_task
-        from lac_rllib.train import parse_sets
 
         get_task(args.task)
         parse_sets(args.set)

@@ -202,8 +202,8 @@ def main(argv=None) -> int:
                         help="another configuration to time (lac-train --set syntax)")
     parser.add_argument("--out", default=None, help="also write the tables (markdown) here")
     args = parser.parse_args(argv)
+    from lac_rllib.algorithms.lac.config import parse_sets
     from lac_rllib.tasks import get_task
-    from lac_rllib.train import parse_sets
 
     variants = {"baseline": BASELINE, "current": {}}
     try:

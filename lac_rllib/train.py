@@ -9,7 +9,6 @@ is written every ``--checkpoint-every`` iterations, and ``--resume`` continues a
 from __future__ import annotations
 
 import argparse
-import ast
 import json
 import math
 import os
@@ -25,25 +24,9 @@ from lac_rllib.algorithms.lac.config import (
     LACConfig,
     build_config,
     field_docs,
+    parse_sets,
 )
 from lac_rllib.tasks import known_tasks
-
-
-def parse_sets(pairs: list[str]) -> dict:
-    """``["temperature=1e-4", "actor_hidden=(64, 64)"]`` → dict; bad names list the accepted ones."""
-    out = {}
-    for pair in pairs:
-        name, sep, raw = pair.partition("=")
-        name = name.strip()
-        if not sep:
-            raise ValueError(f"--set {pair!r}: expected field=value")
-        if name not in FIELD_NAMES:
-            raise ValueError(f"--set: unknown LAC config field {name!r}; accepted: {', '.join(sorted(FIELD_NAMES))}")
-        try:
-            out[name] = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
-            out[name] = raw  # plain strings such as informative / next
-    return out
 
 
 def _fmt(x) -> str:

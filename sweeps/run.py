@@ -116,8 +116,7 @@ def make_plan(args) -> Plan:
         v = getattr(args, flag)
         if v is not None and v < 1:
             raise ValueError(f"--{flag.replace('_', '-')} {v} is invalid; accepted: an integer >= 1")
-    from lac_rllib.algorithms.lac.config import check_field
-    from lac_rllib.train import parse_sets
+    from lac_rllib.algorithms.lac.config import check_field, parse_sets
 
     sets = parse_sets(args.set)  # unknown fields list the accepted ones
     for field, value in sets.items():

@@ -11,8 +11,7 @@ authors' code, [F] FOCOPS, [D] ours.
 from __future__ import annotations
 
 import dataclasses
-import math
-from typing import Any, Callable
+from typing import Any
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
@@ -21,53 +20,27 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.lac.fused_energy import DTYPES as LANGEVIN_DTYPES
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
+from lac_rllib.constrained import fields
+from lac_rllib.constrained.fields import (
+    BOOL,
+    FINITE,
+    FRACTION,
+    INT_GE_0,
+    INT_GE_1,
+    LAYERS,
+    NON_NEGATIVE,
+    POSITIVE,
+    accepted_values,
+    check_value,
+    one_of,
+    or_none,
+    param,
+)
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
 
 CHAIN_AT = ("next", "current")
 LR_SCHEDULES = ("linear", "constant")
-
-
-@dataclasses.dataclass(frozen=True)
-class Accepted:
-    """The values a field accepts, declared once: ``test`` checks a value (:func:`check_field`),
-    ``text`` says it, in the error for a bad value, docs/config.md and ``lac-train --help``."""
-
-    text: str
-    test: Callable[[Any], bool]
-
-
-def _is_int(x) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool)
-
-
-def _is_real(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def one_of(choices: tuple[str, ...]) -> Accepted:
-    return Accepted(" | ".join(map(str, choices)), lambda v: isinstance(v, str) and v in choices)
-
-
-def or_none(accepted: Accepted) -> Accepted:
-    return Accepted(f"None or {accepted.text}", lambda v: v is None or accepted.test(v))
-
-
-# The accepted values several fields share.
-INT_GE_0 = Accepted("an integer >= 0", lambda v: _is_int(v) and v >= 0)
-INT_GE_1 = Accepted("an integer >= 1", lambda v: _is_int(v) and v >= 1)
-FINITE = Accepted("a finite number", _is_real)
-POSITIVE = Accepted("a finite number > 0", lambda v: _is_real(v) and v > 0)
-NON_NEGATIVE = Accepted("a finite number >= 0", lambda v: _is_real(v) and v >= 0)
-FRACTION = Accepted("a number in (0, 1]", lambda v: _is_real(v) and 0 < v <= 1)
-BOOL = Accepted("True | False", lambda v: isinstance(v, bool))
-LAYERS = Accepted("a non-empty sequence of integers >= 1",
-                  lambda v: isinstance(v, (tuple, list)) and len(v) >= 1 and all(_is_int(h) and h >= 1 for h in v))
-
-
-def param(default: Any, *, accepts: Accepted) -> Any:
-    """A field of :class:`LACParams`: its default and the values it accepts."""
-    return dataclasses.field(default=default, metadata={"accepts": accepts})
 
 
 @dataclasses.dataclass
@@ -208,24 +181,6 @@ class LACParams:
     """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
 
 
-#: Each field's accepted values, as its ``param(..., accepts=...)`` declares them.
-FIELD_RANGES: dict[str, Accepted] = {f.name: f.metadata["accepts"] for f in dataclasses.fields(LACParams)}
-
-
-
-
-def field_docs() -> dict[str, str]:
-    """Each field's docstring, read from the source above (the single place it is written)."""
-    import ast
-    import inspect
-
-    body = ast.parse(inspect.getsource(LACParams)).body[0].body
-    docs = {}
-    for node, nxt in zip(body, body[1:]):
-        if isinstance(node, ast.AnnAssign) and isinstance(nxt, ast.Expr):
-            docs[node.target.id] = " ".join(str(nxt.value.value).split())
-    return docs
-
 # Table 4 (MuJoCo) and Table 5 (Safety Gym). "tiny" [D] sizes lac/PointHazard-v0 to learn in
 # about a minute on 2 cores: small nets, short chains, and α_ν = 0.03 because its cost limit (2)
 # is ten times smaller than Safety Gym's (25); with 0.01 ν took ~40k steps to matter, with 0.1 it
@@ -249,13 +204,6 @@ PRESETS: dict[str, dict[str, Any]] = {
         "langevin_fused": False,
     },
 }
-
-
-def check_field(name: str, value: Any) -> None:
-    """Raise a ValueError naming the field, the value and the accepted values if ``value`` is bad."""
-    accepted = FIELD_RANGES.get(name)
-    if accepted is not None and not accepted.test(value):
-        raise ValueError(f"LAC config field {name}={value!r} is invalid; accepted: {accepted.text}")
 
 
 class LACConfig(AlgorithmConfig):
@@ -399,7 +347,25 @@ class LACConfig(AlgorithmConfig):
         return {**super()._model_config_auto_includes, **self.lac_params()}
 
 
-FIELD_NAMES = frozenset(f.name for f in dataclasses.fields(LACParams))
+#: Each field's accepted values, as its ``param(..., accepts=...)`` declares them.
+FIELD_RANGES = accepted_values(LACParams)
+FIELD_NAMES = frozenset(FIELD_RANGES)
+
+
+def field_docs() -> dict[str, str]:
+    """Each LAC field's docstring, from the source of :class:`LACParams`."""
+    return fields.field_docs(LACParams)
+
+
+def check_field(name: str, value: Any) -> None:
+    """Raise a ValueError naming the field, the value and the accepted values if ``value`` is bad."""
+    check_value(FIELD_RANGES, name, value, what="LAC")
+
+
+def parse_sets(pairs: list[str]) -> dict:
+    """``--set FIELD=VALUE`` pairs as LAC fields (values as Python literals); unknown names list the known ones."""
+    return fields.parse_sets(pairs, FIELD_NAMES, what="LAC")
+
 #: Fields that set how fast a run goes, not the algorithm: a resumed run may change them (a
 #: run started before they existed resumes with today's values).
 SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
