@@ -27,20 +27,22 @@ def _code(value) -> str:
     return f"`{_cell(repr(value))}`"
 
 
-def field_groups() -> list[tuple[str, list[str]]]:
-    """[(group title, [field names])] in the order :class:`LACParams` declares them."""
-    source = inspect.getsource(LACParams)
-    # Line numbers (1-based, within ``source``) of the group comments, and each field's group.
-    titles = {i: m.group(1) for i, line in enumerate(source.splitlines(), 1) if (m := _GROUP.match(line))}
+def field_groups(params_cls=LACParams) -> list[tuple[str, list[str]]]:
+    """[(group title, [field names])] in the order ``params_cls`` declares them, its own fields
+    first, then those of its bases (for LAC: the fields every constrained algorithm has)."""
     groups: list[tuple[str, list[str]]] = []
-    for node in ast.parse(source).body[0].body:
-        if not isinstance(node, ast.AnnAssign):
-            continue
-        above = [i for i in titles if i < node.lineno]
-        title = titles[max(above)] if above else "Fields"
-        if not groups or groups[-1][0] != title:
-            groups.append((title, []))
-        groups[-1][1].append(node.target.id)
+    for cls in [c for c in params_cls.__mro__ if dataclasses.is_dataclass(c)]:
+        source = inspect.getsource(cls)
+        # Line numbers (1-based, within ``source``) of the group comments, and each field's group.
+        titles = {i: m.group(1) for i, line in enumerate(source.splitlines(), 1) if (m := _GROUP.match(line))}
+        for node in ast.parse(source).body[0].body:
+            if not isinstance(node, ast.AnnAssign):
+                continue
+            above = [i for i in titles if i < node.lineno]
+            title = titles[max(above)] if above else "Fields"
+            if not groups or groups[-1][0] != title:
+                groups.append((title, []))
+            groups[-1][1].append(node.target.id)
     return groups
 
 
@@ -80,12 +82,14 @@ def config_markdown() -> str:
 
     out += ["", "## Tasks", "",
             "The registered tasks (`lac_rllib/tasks/`; spec.md §6): the preset each applies, its own overrides,",
-            "the cost limit b and the discount of its episode cost Ĵ_C (1 = a plain sum).",
-            "", "| task | preset | overrides | cost limit | episode cost discount |", "|---|---|---|---|---|"]
+            "where its per-step cost comes from, the cost limit b and the discount of its episode cost Ĵ_C (1 = a plain sum).",
+            "", "| task | preset | overrides | cost per step | cost limit | episode cost discount |",
+            "|---|---|---|---|---|---|"]
     for task_id in known_tasks():
         t = get_task(task_id)
         overrides = ", ".join(f"`{k}={v!r}`" for k, v in t.overrides.items())
-        out.append(f"| `{t.id}` | `{t.preset}` | {overrides} | {t.cost_limit:g} | {t.episode_cost_discount:g} |")
+        out.append(f"| `{t.id}` | `{t.preset}` | {overrides} | {_cell(t.cost_source)} | {t.cost_limit:g} "
+                   f"| {t.episode_cost_discount:g} |")
     return "\n".join(out) + "\n"
 
 

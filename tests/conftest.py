@@ -62,3 +62,10 @@ def checkpoint(ray_session, tmp_path_factory):
                                                      "random_iterations": 1}, timesteps=1500)
     train(config, 1500, str(out), log=lambda *a, **k: None)
     return str(out / "checkpoint")
+
+
+def chain(critics, obs, mean, log_std, *, nu, noise=None, generator=None, **settings):
+    """Algorithm 1 with its settings as keywords (the tests' shorthand for langevin_chain + ChainSettings)."""
+    from lac_rllib.algorithms.lac.langevin import ChainSettings, langevin_chain
+
+    return langevin_chain(critics, obs, mean, log_std, nu, ChainSettings(**settings), noise=noise, generator=generator)

@@ -16,9 +16,9 @@ from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.connectors.connector_v2 import ConnectorV2
 from ray.rllib.utils.annotations import override
 
-COSTS = "costs"
-# Keys in episode.custom_data (they survive episode chunking: cut() copies custom_data).
-EPISODE_COST, EPISODE_RETURN = "lac_episode_cost", "lac_episode_return"
+from lac_rllib.constrained.metrics import CD_EPISODE_COST, CD_EPISODE_RETURN, EPISODE_COST_MEAN
+
+COSTS = "costs"  # the train batch's cost column, row-aligned with rewards
 
 
 def step_cost(info: dict) -> float:
@@ -94,22 +94,22 @@ class EpisodeCostCallback(RLlibCallback):
 
     @override(RLlibCallback)
     def on_episode_start(self, *, episode, **kwargs) -> None:
-        episode.custom_data[EPISODE_COST] = 0.0
-        episode.custom_data[EPISODE_RETURN] = 0.0
+        episode.custom_data[CD_EPISODE_COST] = 0.0
+        episode.custom_data[CD_EPISODE_RETURN] = 0.0
 
     @override(RLlibCallback)
     def on_episode_step(self, *, episode, env_runner, **kwargs) -> None:
         t = episode.t - 1  # global index of the step just taken
         gamma_c = env_runner.config.effective_episode_cost_discount
-        episode.custom_data[EPISODE_COST] += gamma_c**t * step_cost(episode.get_infos(-1))
-        episode.custom_data[EPISODE_RETURN] += float(episode.get_rewards(-1))
+        episode.custom_data[CD_EPISODE_COST] += gamma_c**t * step_cost(episode.get_infos(-1))
+        episode.custom_data[CD_EPISODE_RETURN] += float(episode.get_rewards(-1))
 
     @override(RLlibCallback)
     def on_episode_end(self, *, episode, metrics_logger, **kwargs) -> None:
-        metrics_logger.log_value("episode_cost_mean", episode.custom_data[EPISODE_COST], window=100)
+        metrics_logger.log_value(EPISODE_COST_MEAN, episode.custom_data[CD_EPISODE_COST], window=100)
 
 
 def completed_episode_stats(episodes) -> tuple[list[float], list[float]]:
     """(returns, costs) of the episodes that ended in ``episodes`` (chunks from one sample)."""
-    done = [e for e in episodes if e.is_done and EPISODE_COST in e.custom_data]
-    return ([e.custom_data[EPISODE_RETURN] for e in done], [e.custom_data[EPISODE_COST] for e in done])
+    done = [e for e in episodes if e.is_done and CD_EPISODE_COST in e.custom_data]
+    return ([e.custom_data[CD_EPISODE_RETURN] for e in done], [e.custom_data[CD_EPISODE_COST] for e in done])

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import math
 
+from ray.air.constants import TRAINING_ITERATION
 from ray.rllib.core import DEFAULT_MODULE_ID
-from ray.rllib.utils.metrics import LEARNER_RESULTS, TRAINING_ITERATION
+from ray.rllib.utils.metrics import LEARNER_RESULTS
 
 # ----- Top level of every iteration's result -----
 # Means over the episodes completed in the iteration (the last known values carry over an

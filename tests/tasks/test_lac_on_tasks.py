@@ -17,8 +17,8 @@ from conftest import tiny_config, train_batch
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
-from lac_rllib.algorithms.lac.learner import ACTOR_LOSS, CRITIC_LOSS, NU, Q_COST_MEAN, Q_REWARD_MEAN
 from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.metrics import ACTOR_LOSS, CRITIC_LOSS, NU, Q_COST_MEAN, Q_REWARD_MEAN
 from lac_rllib.tasks import get_task
 
 pytestmark = pytest.mark.slow  # trains on every task family

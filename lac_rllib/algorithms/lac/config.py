@@ -14,6 +14,11 @@ import dataclasses
 from typing import Any
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
+from ray.rllib.connectors.common.batch_individual_items import BatchIndividualItems
+from ray.rllib.connectors.learner import (
+    AddNextObservationsFromEpisodesToTrainBatch,
+    AddObservationsFromEpisodesToBatch,
+)
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
@@ -21,6 +26,7 @@ from lac_rllib.algorithms.lac.fused_energy import DTYPES as LANGEVIN_DTYPES
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
+from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
 from lac_rllib.constrained.fields import (
     BOOL,
     FINITE,
@@ -36,16 +42,16 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
-from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
-from lac_rllib.tasks import get_task
+from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 CHAIN_AT = ("next", "current")
 LR_SCHEDULES = ("linear", "constant")
 
 
 @dataclasses.dataclass
-class LACParams:
-    """The LAC hyperparameters (docs/spec.md §1-5). Defaults are the MuJoCo column of docs/spec.md §5.
+class LACParams(SafeTaskParams):
+    """The LAC hyperparameters (docs/spec.md §1-5), after the fields every constrained algorithm has
+    (:class:`SafeTaskParams`). Defaults are the MuJoCo column of docs/spec.md §5.
 
     Each field: ``name: type = param(default, accepts=...)`` and, below it, its docstring.
     """
@@ -158,13 +164,6 @@ class LACParams:
     over 5 (mujoco) complete 20 and 5 whole episodes per iteration. docs/speed.md has the figures."""
     random_iterations: int = param(5, accepts=INT_GE_0)
     """Iterations that act uniformly at random before the generator takes over [C]."""
-    obs_normalization: bool = param(True, accepts=BOOL)
-    """Running mean/std observation filter [C]; its state is checkpointed."""
-    obs_clip: float = param(5.0, accepts=POSITIVE)
-    """Clip of the normalised observation [C]."""
-    obs_std_floor: float = param(1e-2, accepts=NON_NEGATIVE)
-    """The filter divides by max(std, obs_std_floor) [C], so a near-constant observation
-    dimension is not blown up to ±obs_clip; 0 = RLlib's std + 1e-8."""
     store_replay_buffer: bool = param(True, accepts=BOOL)
     """Keep the replay buffer in checkpoints [D; RLlib's store_buffer_in_checkpoints], so a resumed
     or retried run trains on the data it had, not on an empty buffer; False keeps checkpoints
@@ -173,12 +172,6 @@ class LACParams:
     """Intra-op torch threads of the learner process [D]: minibatch tensors are small, and on a
     shared 2-core machine 2 threads made one critic-gradient op ~250x slower than 1 (measured).
     A sweep sets it to the CPUs of a trial."""
-
-    # --- task ---
-    cost_limit: float | None = param(None, accepts=or_none(NON_NEGATIVE))
-    """b; None = the task's limit (docs/spec.md §6)."""
-    episode_cost_discount: float | None = param(None, accepts=or_none(FRACTION))
-    """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
 
 
 # Table 4 (MuJoCo) and Table 5 (Safety Gym). "tiny" [D] sizes lac/PointHazard-v0 to learn in
@@ -206,12 +199,14 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-class LACConfig(AlgorithmConfig):
+class LACConfig(SafeTaskConfig, AlgorithmConfig):
     """Config for :class:`lac_rllib.algorithms.lac.algorithm.LAC`. See :class:`LACParams` for the fields.
 
     ``LACConfig().task("SafetyPointGoal1-v0")`` sets the env, its cost convention and the
     task's preset (docs/spec.md §5, Tables 4-5); explicit ``training(...)`` values win over presets.
     """
+
+    PRESETS = PRESETS
 
     def __init__(self, algo_class=None):
         from lac_rllib.algorithms.lac.algorithm import LAC
@@ -219,23 +214,12 @@ class LACConfig(AlgorithmConfig):
         super().__init__(algo_class=algo_class or LAC)
         for f in dataclasses.fields(LACParams):
             setattr(self, f.name, f.default)
-        self.task_id: str | None = None
-        self.preset_name: str | None = None
         # RLlib fields with LAC's values.
         self.gamma = 0.99  # [P]
         self.train_batch_size_per_learner = self.lac_minibatch_size
         self.clip_actions = True  # the env clips; the actor is unsquashed [C]
         self.normalize_actions = False
         self.rollout_fragment_length = "auto"
-        self.num_env_runners = 0
-        # Wait for the runners: an iteration needs all env_steps_per_iteration steps, and RLlib's
-        # 60 s default silently drops a runner that needs longer (20k/K navigation steps at
-        # ~700 steps/s already do), leaving the iteration short of data. A dead runner is found
-        # by RLlib's fault tolerance, not by this timeout.
-        self.sample_timeout_s = None
-        from lac_rllib.constrained.costs import EpisodeCostCallback
-
-        self.callbacks_class = EpisodeCostCallback
 
     @override(AlgorithmConfig)
     def training(self, **kwargs) -> "LACConfig":
@@ -251,39 +235,6 @@ class LACConfig(AlgorithmConfig):
         if "lac_minibatch_size" in own:
             self.train_batch_size_per_learner = self.lac_minibatch_size
         return self
-
-    def task(self, task_id: str, *, preset: str | None = None) -> "LACConfig":
-        """Train on a registered safe task; apply its LAC preset (or ``preset``) first."""
-        spec = get_task(task_id)  # unknown id -> ValueError listing the known ones
-        name = preset or spec.preset
-        if name not in PRESETS:
-            raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(PRESETS)}")
-        self.task_id, self.preset_name = task_id, name
-        self.training(**{**PRESETS[name], **spec.overrides})
-        from lac_rllib.algorithms.lac.algorithm import register_task_env
-
-        register_task_env(task_id)
-        self.environment(env=task_id)
-        return self
-
-    # ----- derived values -----
-    @property
-    def task_spec(self):
-        return get_task(self.task_id) if self.task_id else None
-
-    @property
-    def effective_cost_limit(self) -> float:
-        if self.cost_limit is not None:
-            return float(self.cost_limit)
-        if self.task_spec is None:
-            raise ValueError("cost_limit is unset and no task is set: call .task(id) or set it")
-        return float(self.task_spec.cost_limit)
-
-    @property
-    def effective_episode_cost_discount(self) -> float:
-        if self.episode_cost_discount is not None:
-            return float(self.episode_cost_discount)
-        return float(self.task_spec.episode_cost_discount) if self.task_spec else 1.0
 
     def lac_params(self) -> dict[str, Any]:
         """The LAC fields as a plain dict (for run metadata and the RLModule)."""
@@ -319,13 +270,15 @@ class LACConfig(AlgorithmConfig):
         return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
 
     @override(AlgorithmConfig)
-    def build_env_to_module_connector(self, env=None, spaces=None, device=None):
-        pipeline = super().build_env_to_module_connector(env=env, spaces=spaces, device=device)
-        if self.obs_normalization:
-            # Running mean/std, clipped [C]. It writes the normalised observation back into
-            # the episode, so replay and learner see what the actor saw; its state is part of
-            # the env runners' state, hence of every checkpoint.
-            pipeline.prepend(FlooredMeanStdFilter(clip_by_value=self.obs_clip, std_floor=self.obs_std_floor))
+    def build_learner_connector(self, input_observation_space, input_action_space, device=None):
+        """RLlib's learner pipeline plus s' for the critic targets, then the cost of each row
+        (docs/dependencies.md, "The cost column": this order), and a shuffle of the rows (one pass
+        over the buffer per iteration, docs/spec.md §5). RLlib's SAC adds s' the same way."""
+        pipeline = super().build_learner_connector(
+            input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
+        pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch())
+        pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
+        pipeline.insert_after(BatchIndividualItems, ShuffleRows(seed=self.seed))
         return pipeline
 
     @override(AlgorithmConfig)

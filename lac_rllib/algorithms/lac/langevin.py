@@ -19,13 +19,14 @@ that tests and ``benchmarks/langevin.py`` compare against.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable
 
 import torch
 
-from lac_rllib.algorithms.lac.fused_energy import make_grad_fn
+from lac_rllib.algorithms.lac.fused_energy import DTYPES, make_grad_fn
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, cost_rows, reward_rows
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
@@ -159,46 +160,69 @@ def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch
     return grad_fn
 
 
-def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tensor,
-                   log_std: torch.Tensor, *, steps: int, step_size: float, temperature: float,
-                   nu, logp_weight: float = 1.0, start: str = INFORMATIVE, low=None, high=None,
-                   grad_clip: float | None = None, grad_clip_mode: str = "batch",
-                   noise: torch.Tensor | None = None,
-                   generator: torch.Generator | None = None, fused: bool = False,
-                   dtype: str = "float32") -> ChainResult:
-    """Algorithm 1 at states ``obs``; ``mean``/``log_std`` are the TARGET actor's π_φ'(·|s).
+@dataclass(frozen=True, eq=False)
+class ChainSettings:
+    """Algorithm 1's settings, checked once when made (``LACTorchRLModule`` makes one from its
+    config at setup; ``dataclasses.replace`` gives a variant, e.g. another T for evaluation).
+    The fields are those of ``LACParams`` (docs/config.md) without the ``langevin_`` prefix."""
+
+    steps: int  # T
+    step_size: float  # η
+    temperature: float  # λ
+    logp_weight: float = 1.0  # w
+    start: str = INFORMATIVE  # ã₀ ~ π_φ'(·|s) (eq. 11), or N(0, I) (NI)
+    low: torch.Tensor | None = None  # action bounds the chain is clamped to after every step (None: free)
+    high: torch.Tensor | None = None
+    grad_clip: float | None = None  # clip of ∇_a E at every step (None: off), see clip_grad
+    grad_clip_mode: str = "batch"
+    fused: bool = False  # each step's energy gradient through torch.compile (fused_energy)
+    dtype: str = "float32"  # the critics' matmul inputs: "float32" | "bfloat16"
+
+    def __post_init__(self):
+        _check_chain_args(self.steps, self.step_size, self.grad_clip, self.grad_clip_mode)
+        if not self.temperature > 0:
+            raise ValueError(f"temperature={self.temperature!r}; must be > 0")
+        if self.start not in STARTS:
+            raise ValueError(f"start={self.start!r}; accepted: {STARTS}")
+        if self.dtype not in DTYPES:
+            raise ValueError(f"dtype={self.dtype!r}; accepted: {' | '.join(DTYPES)}")
+
+    def with_steps(self, steps: int | None = None, step_size: float | None = None) -> "ChainSettings":
+        """These settings with T and η overridden where given."""
+        return dataclasses.replace(self, steps=steps or self.steps, step_size=step_size or self.step_size)
+
+
+def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor,
+                   nu, settings: ChainSettings, *, noise: torch.Tensor | None = None,
+                   generator: torch.Generator | None = None) -> ChainResult:
+    """Algorithm 1 at states ``obs`` with the multiplier ``nu``; ``mean``/``log_std`` are the TARGET
+    actor's π_φ'(·|s).
 
     ``noise`` (optional, for reproducible comparisons) is (T+1, B, A): ``noise[0]`` is z₀ of the
     start, ``noise[1:]`` the step noise; otherwise all noise is drawn from ``generator``.
-    ``fused``: each step's energy gradient through torch.compile (lac_rllib.algorithms.lac.fused_energy);
-    ``dtype``: the critics' matmuls in "float32" or "bfloat16" (the action stays float32).
     """
-    _check_chain_args(steps, step_size, grad_clip, grad_clip_mode)
-    if not temperature > 0:
-        raise ValueError(f"temperature={temperature!r}; must be > 0")
-    if start not in STARTS:
-        raise ValueError(f"start={start!r}; accepted: {STARTS}")
+    s = settings
     if float(nu) < 0:
         raise ValueError(f"nu={float(nu)!r}; must be ≥ 0")
     shape = mean.shape
-    if noise is not None and noise.shape != (steps + 1, *shape):
-        raise ValueError(f"noise.shape={tuple(noise.shape)}; expected {(steps + 1, *shape)}")
+    if noise is not None and noise.shape != (s.steps + 1, *shape):
+        raise ValueError(f"noise.shape={tuple(noise.shape)}; expected {(s.steps + 1, *shape)}")
     with torch.no_grad():
         mean, log_std = mean.detach(), log_std.detach().expand_as(mean)
         z0 = noise[0] if noise is not None else torch.randn(
             shape, generator=generator, dtype=mean.dtype, device=mean.device)
         # eq. (11): start from the generator's own sample; NI: start from N(0, I).
-        a0 = mean + torch.exp(log_std) * z0 if start == INFORMATIVE else z0
+        a0 = mean + torch.exp(log_std) * z0 if s.start == INFORMATIVE else z0
         proj = critics.project_state(obs)
-        if fused or dtype != "float32":
-            grad_fn = make_grad_fn(critics, proj, mean, log_std, temperature=temperature, nu=nu,
-                                   logp_weight=logp_weight, compiled=fused, dtype=dtype)
+        if s.fused or s.dtype != "float32":
+            grad_fn = make_grad_fn(critics, proj, mean, log_std, temperature=s.temperature, nu=nu,
+                                   logp_weight=s.logp_weight, compiled=s.fused, dtype=s.dtype)
         else:
-            grad_fn = lac_energy_and_grad(critics, proj, mean, log_std, temperature=temperature,
-                                          nu=nu, logp_weight=logp_weight)
-        return run_chain(grad_fn, a0, steps=steps, step_size=step_size,
+            grad_fn = lac_energy_and_grad(critics, proj, mean, log_std, temperature=s.temperature,
+                                          nu=nu, logp_weight=s.logp_weight)
+        return run_chain(grad_fn, a0, steps=s.steps, step_size=s.step_size,
                          noise=None if noise is None else noise[1:], generator=generator,
-                         low=low, high=high, grad_clip=grad_clip, grad_clip_mode=grad_clip_mode)
+                         low=s.low, high=s.high, grad_clip=s.grad_clip, grad_clip_mode=s.grad_clip_mode)
 
 
 def naive_langevin_chain(critics: CriticEnsemble, actor_mean_logstd_fn, obs: torch.Tensor,

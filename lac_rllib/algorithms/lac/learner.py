@@ -7,9 +7,9 @@ it (eq. 14, docs/spec.md §4), the learning-rate schedules and the next bound af
 
 Each equation is written out, in the notation of docs/spec.md, where it is computed: the critic
 targets (13) in :func:`critic_targets`; the critic loss (12) and the actor loss (15-16) in
-``compute_loss_for_module``; ν's step (14) in ``lagrange_step`` and its bound ν_max in
-``after_gradient_based_update``; Polyak in ``apply_gradients``. Methods marked ``@override`` are
-RLlib's hooks; the others are LAC's own.
+``compute_loss_for_module``; ν's step (14) and its bound ν_max in the module's
+:class:`~lac_rllib.constrained.lagrange.LagrangeMultiplier`; Polyak in ``apply_gradients``. Methods
+marked ``@override`` are RLlib's hooks; the others are LAC's own.
 """
 
 from __future__ import annotations
@@ -17,11 +17,6 @@ from __future__ import annotations
 from typing import Any
 
 import torch
-from ray.rllib.connectors.common.batch_individual_items import BatchIndividualItems
-from ray.rllib.connectors.learner import (
-    AddNextObservationsFromEpisodesToTrainBatch,
-    AddObservationsFromEpisodesToBatch,
-)
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.torch.torch_learner import TorchLearner
 from ray.rllib.core.learner.utils import update_target_network
@@ -30,35 +25,36 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.algorithms.lac.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
-from lac_rllib.constrained.costs import COSTS, AddCostsFromInfos, ShuffleRows
+from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
+from lac_rllib.constrained.metrics import (
+    ACTOR_KL,
+    ACTOR_LOSS,
+    ACTOR_NLL,
+    ACTOR_STD_MEAN,
+    CRITIC_LOSS,
+    LANGEVIN_AT_BOUND,
+    LANGEVIN_CLIP_FRACTION,
+    LANGEVIN_DISPLACEMENT,
+    LANGEVIN_ENERGY_DROP,
+    LANGEVIN_GRAD_NORM,
+    NU,
+    NU_MAX,
+    Q_COST_MEAN,
+    Q_REWARD_MEAN,
+    TARGET_COST_MEAN,
+    TARGET_REWARD_MEAN,
+    TS_ITERATION,
+    TS_MEAN_EPISODE_COST,
+)
 
 CRITIC, ACTOR = "critic", "actor"  # optimizer names, one per loss
-
-# ----- Metric keys, declared once (as RLlib's sac_learner declares QF_LOSS_KEY) -----
-# Logged per module (results["learners"][module_id]); the last minibatch's value unless noted.
-CRITIC_LOSS, ACTOR_LOSS = "critic_loss", "actor_loss"  # L_Q (eq. 12), L_A (eqs. 15-16)
-ACTOR_NLL, ACTOR_KL = "actor_nll", "actor_kl"  # L_A's terms: −mean log π_φ(ã|s*), mean KL(π_φ ‖ π_φ')
-Q_REWARD_MEAN, Q_COST_MEAN = "q_reward_mean", "q_cost_mean"  # mean online Q_R(s, a), Q_C(s, a)
-# ν (the algorithm reports it at the top level too, under the same key) and the bound ν_max it was
-# held under this iteration; the iteration's mean targets ȳ_R, ȳ_C (they set the next bound).
-NU, NU_MAX = "nu", "nu_max"
-TARGET_REWARD_MEAN, TARGET_COST_MEAN = "target_reward_mean", "target_cost_mean"
-# Chain health (docs/spec.md §1): means over the last HEALTH_WINDOW minibatches, about one
-# iteration (one pass over a full 50k buffer is 195 minibatches of 256).
+# Chain health is averaged over the last HEALTH_WINDOW minibatches, about one iteration (one pass
+# over a full 50k buffer is 195 minibatches of 256).
 HEALTH_WINDOW = 200
-LANGEVIN_ENERGY_DROP = "langevin_energy_drop"  # E(s, ã_0) − E(s, ã_T)
-LANGEVIN_DISPLACEMENT = "langevin_displacement"  # ‖ã_T − ã_0‖₂
-LANGEVIN_GRAD_NORM = "langevin_grad_norm"  # ‖∇_a E‖₂ per sample, before the clip
-LANGEVIN_CLIP_FRACTION = "langevin_clip_fraction"  # fraction of chain steps the clip bound
-LANGEVIN_AT_BOUND = "langevin_at_bound"  # fraction of end points ã_T on an action bound
-ACTOR_STD_MEAN = "actor_std_mean"  # mean σ of π_φ
-CHAIN_HEALTH_KEYS = (LANGEVIN_ENERGY_DROP, LANGEVIN_DISPLACEMENT, LANGEVIN_GRAD_NORM,
-                     LANGEVIN_CLIP_FRACTION, LANGEVIN_AT_BOUND, ACTOR_STD_MEAN)
-#: What the trainer and the sweep report per iteration from the learner's results.
-REPORTED_KEYS = (CRITIC_LOSS, ACTOR_LOSS, ACTOR_NLL, ACTOR_KL, Q_REWARD_MEAN, Q_COST_MEAN,
-                 TARGET_REWARD_MEAN, TARGET_COST_MEAN, NU_MAX, *CHAIN_HEALTH_KEYS)
-# Keys the algorithm passes in ``timesteps`` to every update call.
-TS_EPISODE_COST, TS_ITERATION = "lac_episode_cost", "lac_training_iteration"
+#: The learner's own entries in its checkpointed state (RLlib's get_state keeps only the module,
+#: the optimizers and the metrics: docs/dependencies.md).
+STATE_ITERATION, STATE_LAGRANGE = "lac_iteration", "lagrange"
 
 
 def critic_targets(batch, q_next: torch.Tensor, n_reward: int, config) -> tuple[torch.Tensor, torch.Tensor]:
@@ -84,23 +80,22 @@ class LACTorchLearner(TorchLearner):
     @override(TorchLearner)
     def build(self) -> None:
         torch.set_num_threads(self.config.torch_threads)
-        super().build()
+        super().build()  # the learner connector comes from LACConfig.build_learner_connector
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None
         )
-        # s' for the critic targets, then the cost of each row (docs/dependencies.md, "The cost column": this order).
-        self._learner_connector.insert_after(
-            AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch()
-        )
-        self._learner_connector.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
-        self._learner_connector.insert_after(BatchIndividualItems, ShuffleRows(seed=self.config.seed))
         self._iteration = 0
-        self._nu_max = 2.0  # [C]'s first bound; only used with nu_max_adaptive
-        self._y_sums = torch.zeros(3)  # Σ y_R, Σ y_C, count over the current iteration
+        self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
+
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
+        """ν of ``module``: eq. (14)'s gradient step, under [C]'s bound when ``nu_max_adaptive``."""
+        config = self.config.get_config_for_module(module_id)
+        return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit,
+                                  rule=GradientStep(config.nu_lr), bounded=config.nu_max_adaptive)
 
     @override(TorchLearner)
     def configure_optimizers_for_module(self, module_id, config=None) -> None:
-        module = self._module[module_id]
+        module = self.module[module_id]
         for name, net, lr in ((CRITIC, module.critics, config.critic_lr), (ACTOR, module.actor, config.actor_lr)):
             params = self.get_parameters(net)
             self.register_optimizer(
@@ -113,46 +108,23 @@ class LACTorchLearner(TorchLearner):
     # ----- ν (eq. 14), once per iteration before the gradient steps -----
     @override(TorchLearner)
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
-        """ν's step, eq. (14) (``lagrange_step``), before the iteration's gradient steps (Algorithm 2,
-        line 5): Ĵ_C is the mean cost of the episodes completed in the iteration's batch (none
-        completed: no step), the bound is ν_max when ``nu_max_adaptive``."""
+        """ν's step, eq. (14), before the iteration's gradient steps (Algorithm 2, line 5): Ĵ_C is
+        the mean cost of the episodes completed in the iteration's batch (none completed: no step)."""
         super().before_gradient_based_update(timesteps=timesteps)
         self._iteration = int(timesteps.get(TS_ITERATION, self._iteration))
-        episode_cost = timesteps.get(TS_EPISODE_COST)
-        for mid, module in self.module._rl_modules.items():
-            config = self.config.get_config_for_module(mid)
-            if episode_cost is not None:
-                module.nu.copy_(self.lagrange_step(
-                    float(module.nu), episode_cost, config.effective_cost_limit, config.nu_lr,
-                    self._nu_max if config.nu_max_adaptive else None,
-                ))
-        self._y_sums.zero_()
+        for multiplier in self.multipliers.values():
+            multiplier.step(timesteps.get(TS_MEAN_EPISODE_COST))
+            multiplier.bound.start_iteration()
 
     @override(TorchLearner)
     def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
-        """Steps the lr schedules, then sets [C]'s bound for the next ν step (docs/spec.md §4) from
-        ȳ_R, ȳ_C, the means of y_R, y_C over every minibatch of this iteration (not the last one):
-
-            ν_max = 2·|ȳ_R| / max(|ȳ_C|, 1e-8)        (ν_max = 2 until the first iteration ends)
-        """
+        """Steps the lr schedules, then sets each multiplier's bound for the next ν step from this
+        iteration's mean targets ȳ_R, ȳ_C (logged)."""
         super().after_gradient_based_update(timesteps=timesteps)  # steps the lr schedules
-        if self._y_sums[2] == 0:
-            return
-        mean_r, mean_c = (self._y_sums[:2] / self._y_sums[2]).tolist()
-        self._nu_max = 2.0 * abs(mean_r) / max(abs(mean_c), 1e-8)
-        for mid in self.module._rl_modules:
-            self.metrics.log_dict({TARGET_REWARD_MEAN: mean_r, TARGET_COST_MEAN: mean_c}, key=mid, window=1)
-
-    @staticmethod
-    def lagrange_step(nu: float, episode_cost: float, cost_limit: float, lr: float, nu_max=None) -> torch.Tensor:
-        """ν's projected step, eq. (14), under [C]'s bound (docs/spec.md §4):
-
-            ν ← min( ν_max, max(0, ν + α_ν·(Ĵ_C − b)) )
-
-        α_ν = ``lr``, Ĵ_C = ``episode_cost``, b = ``cost_limit``; ``nu_max=None`` drops the bound,
-        eq. (14) as [P] writes it."""
-        nu = max(0.0, nu + lr * (episode_cost - cost_limit))
-        return torch.tensor(min(nu, nu_max) if nu_max is not None else nu)
+        for mid, multiplier in self.multipliers.items():
+            means = multiplier.bound.end_iteration()
+            if means is not None:
+                self.metrics.log_dict({TARGET_REWARD_MEAN: means[0], TARGET_COST_MEAN: means[1]}, key=mid, window=1)
 
     # ----- losses -----
     @override(TorchLearner)
@@ -179,14 +151,15 @@ class LACTorchLearner(TorchLearner):
         actor_loss = nll + config.beta * kl
 
         with torch.no_grad():
-            self._y_sums += torch.stack([y_r.sum(), y_c.sum(), torch.tensor(float(len(y_r)))])
+            multiplier = self.multipliers[module_id]
+            multiplier.bound.observe(y_r, y_c)
             chain = fwd_out[M.CHAIN]
             self.metrics.log_dict({
                 CRITIC_LOSS: critic_loss, ACTOR_LOSS: actor_loss, ACTOR_NLL: nll, ACTOR_KL: kl,
                 Q_REWARD_MEAN: q_r.mean(), Q_COST_MEAN: q_c.mean(), NU: module.nu.clone(),
             }, key=module_id, window=1)
-            if config.nu_max_adaptive:
-                self.metrics.log_value((module_id, NU_MAX), self._nu_max, window=1)
+            if multiplier.upper is not None:
+                self.metrics.log_value((module_id, NU_MAX), multiplier.upper, window=1)
             # Chain health over the last HEALTH_WINDOW minibatches (≈ this iteration's).
             self.metrics.log_dict({
                 LANGEVIN_ENERGY_DROP: (chain.energy_start - chain.energy_end).mean(),
@@ -209,34 +182,42 @@ class LACTorchLearner(TorchLearner):
 
     @override(TorchLearner)
     def apply_gradients(self, gradients_dict) -> None:
-        """The optimizer steps (the actor's from ``actor_update_start_iteration`` on [C]), then Polyak
-        of every target, θ' ← τ·θ + (1 − τ)·θ' (Algorithm 2, lines 11-13)."""
-        for pid, grad in gradients_dict.items():
-            self._params[pid].grad = grad
-        for mid, module in self.module._rl_modules.items():
+        """TorchLearner's optimizer steps (with its NaN/inf gradient guard), the actor's only from
+        ``actor_update_start_iteration`` on [C]; then Polyak of every target,
+        θ' ← τ·θ + (1 − τ)·θ' (Algorithm 2, lines 11-13)."""
+        grads = dict(gradients_dict)
+        frozen_actors = []
+        for mid in self.module.keys():
             config = self.config.get_config_for_module(mid)
-            actor_on = self._iteration >= config.actor_update_start_iteration
-            for name, optim in self.get_optimizers_for_module(mid):
-                if name == ACTOR and not actor_on:
-                    continue
-                optim.step()
-            if config.polyak_from_actor_start and not actor_on:
+            if self._iteration < config.actor_update_start_iteration:
+                actor = self.get_optimizer(mid, ACTOR)
+                for pid in self.filter_param_dict_for_optimizer(grads, actor):
+                    del grads[pid]
+                frozen_actors.append(actor)
+        # A parameter whose .grad is None is skipped by Adam (no step, no moment update), so the
+        # actor's optimizer state stays as if it had not been stepped at all, as [C]'s.
+        for optim in frozen_actors:
+            optim.zero_grad(set_to_none=True)
+        super().apply_gradients(grads)
+        for mid, module in self.module.items():
+            config = self.config.get_config_for_module(mid)
+            if config.polyak_from_actor_start and self._iteration < config.actor_update_start_iteration:
                 continue  # [C]: the targets stay at their init until the actor trains
             # Algorithm 2, lines 11-13: Polyak after every gradient step.
             for main_net, target_net in module.unwrapped().get_target_network_pairs():
                 update_target_network(main_net=main_net, target_net=target_net, tau=config.polyak_tau)
 
-    # ----- state: ν rides in the module; the bound and iteration are kept here -----
+    # ----- state: ν rides in the module; the iteration and each multiplier's rule and bound here -----
     @override(TorchLearner)
     def get_state(self, *args, **kwargs):
         state = super().get_state(*args, **kwargs)
-        state["lac"] = {"nu_max": self._nu_max, "iteration": self._iteration, "y_sums": self._y_sums.tolist()}
+        state[STATE_ITERATION] = self._iteration
+        state[STATE_LAGRANGE] = {mid: m.get_state() for mid, m in self.multipliers.items()}
         return state
 
     @override(TorchLearner)
     def set_state(self, state) -> None:
         super().set_state(state)
-        if "lac" in state:
-            self._nu_max = float(state["lac"]["nu_max"])
-            self._iteration = int(state["lac"]["iteration"])
-            self._y_sums = torch.tensor(state["lac"]["y_sums"])
+        self._iteration = int(state.get(STATE_ITERATION, self._iteration))
+        for mid, multiplier_state in state.get(STATE_LAGRANGE, {}).items():
+            self.multipliers[mid].set_state(multiplier_state)

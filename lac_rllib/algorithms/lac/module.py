@@ -24,7 +24,7 @@ from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.config import LEGACY_VALUES
-from lac_rllib.algorithms.lac.langevin import ChainResult, langevin_chain
+from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
 # Keys of the forward_train output, declared once.
@@ -52,8 +52,7 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
         if not self.inference_only:
             self.critics = CriticEnsemble(obs_dim, act_dim, hidden=tuple(cfg["critic_hidden"]))
-        self._low = torch.tensor(np.array(self.action_space.low), dtype=torch.float32)
-        self._high = torch.tensor(np.array(self.action_space.high), dtype=torch.float32)
+        self.chain_settings = chain_settings(cfg, self.action_space)
 
     # ----- acting (env runners) -----
     @override(TorchRLModule)
@@ -94,25 +93,13 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         return out
 
     def langevin(self, obs, mean, log_std, *, steps=None, step_size=None, generator=None) -> ChainResult:
-        """Algorithm 1 at ``obs`` with the online critics, ν and this module's settings.
+        """Algorithm 1 at ``obs`` with the online critics, ν and this module's chain settings.
 
         ``mean``/``log_std`` are π_φ'(·|obs); ``steps``/``step_size`` override T and η.
         """
-        cfg = self.model_config
-        clamp = cfg["langevin_clamp"]
-        return langevin_chain(
-            self.critics, obs, mean, log_std,
-            steps=steps or cfg["langevin_steps"],
-            step_size=step_size or cfg["langevin_step_size"],
-            temperature=cfg["temperature"], nu=self.nu, logp_weight=cfg["logp_weight"],
-            start=cfg["langevin_start"],
-            low=self._low if clamp else None, high=self._high if clamp else None,
-            grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
-            generator=generator,
-            # Checkpoints written before these fields existed ran the eager float32 chain.
-            fused=cfg.get("langevin_fused", LEGACY_VALUES["langevin_fused"]),
-            dtype=cfg.get("langevin_dtype", LEGACY_VALUES["langevin_dtype"]),
-        )
+        settings = self.chain_settings if steps is None and step_size is None else \
+            self.chain_settings.with_steps(steps, step_size)
+        return langevin_chain(self.critics, obs, mean, log_std, self.nu, settings, generator=generator)
 
     # ----- RLlib APIs -----
     @override(TargetNetworkAPI)
@@ -133,3 +120,16 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         return ["critics", "target_critics", "target_actor"]
 
 
+def chain_settings(cfg: dict, action_space) -> ChainSettings:
+    """The chain's settings from the module's model config (LAC's fields), made once per module."""
+    clamp = cfg["langevin_clamp"]
+    return ChainSettings(
+        steps=cfg["langevin_steps"], step_size=cfg["langevin_step_size"], temperature=cfg["temperature"],
+        logp_weight=cfg["logp_weight"], start=cfg["langevin_start"],
+        low=torch.tensor(np.array(action_space.low), dtype=torch.float32) if clamp else None,
+        high=torch.tensor(np.array(action_space.high), dtype=torch.float32) if clamp else None,
+        grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
+        # Checkpoints written before these fields existed ran the eager float32 chain.
+        fused=cfg.get("langevin_fused", LEGACY_VALUES["langevin_fused"]),
+        dtype=cfg.get("langevin_dtype", LEGACY_VALUES["langevin_dtype"]),
+    )

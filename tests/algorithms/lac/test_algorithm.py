@@ -9,9 +9,18 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, LEARNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from lac_rllib.algorithms.lac.algorithm import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, LAC
-from lac_rllib.algorithms.lac.learner import NU, NU_MAX, TARGET_COST_MEAN, TARGET_REWARD_MEAN, TS_EPISODE_COST
+from lac_rllib.algorithms.lac.algorithm import LAC
 from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.metrics import (
+    ENV_STEPS,
+    EPISODE_COST,
+    EPISODE_RETURN,
+    NU,
+    NU_MAX,
+    TARGET_COST_MEAN,
+    TARGET_REWARD_MEAN,
+    TS_MEAN_EPISODE_COST,
+)
 
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 
@@ -50,7 +59,7 @@ def test_nu_follows_completed_episodes_only(ray_session):
         assert algo.train()[NU] == pytest.approx(0.18, abs=1e-6)
         # No completed episode → no ν step.
         learner = algo.learner_group._learner
-        learner.before_gradient_based_update(timesteps={TS_EPISODE_COST: None})
+        learner.before_gradient_based_update(timesteps={TS_MEAN_EPISODE_COST: None})
         assert float(learner.module[DEFAULT_MODULE_ID].nu) == pytest.approx(0.18, abs=1e-6)
     finally:
         algo.stop()

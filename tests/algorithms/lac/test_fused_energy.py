@@ -7,9 +7,9 @@ import math
 
 import pytest
 import torch
+from conftest import chain
 
 from lac_rllib.algorithms.lac import fused_energy
-from lac_rllib.algorithms.lac.langevin import langevin_chain
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
 ETA = 1e-4
@@ -34,7 +34,7 @@ def _case(obs_dim=9, act_dim=3, batch=64, hidden=(64, 64, 64), activation="mish"
 @pytest.mark.parametrize("clip", [None, 1000.0])
 def test_pure_function_equals_the_hand_written_backward(activation, clip):
     critics, obs, mean, log_std, kw = _case(activation=activation)
-    ref = langevin_chain(critics, obs, mean, log_std, grad_clip=clip, **kw)
+    ref = chain(critics, obs, mean, log_std, grad_clip=clip, **kw)
     grad_fn = fused_energy.make_grad_fn(critics, critics.project_state(obs), mean, log_std, temperature=1e-3,
                                         nu=0.7, logp_weight=1.0, compiled=False)
     energy, grad = grad_fn(ref.action)
@@ -51,8 +51,8 @@ def test_pure_function_equals_the_hand_written_backward(activation, clip):
 
 def test_compiled_chain_equals_eager_chain():
     critics, obs, mean, log_std, kw = _case()
-    eager = langevin_chain(critics, obs, mean, log_std, grad_clip=1000.0, **kw)
-    fused = langevin_chain(critics, obs, mean, log_std, grad_clip=1000.0, fused=True, **kw)
+    eager = chain(critics, obs, mean, log_std, grad_clip=1000.0, **kw)
+    fused = chain(critics, obs, mean, log_std, grad_clip=1000.0, fused=True, **kw)
     assert not fused_energy._compile_failed, "torch.compile fell back to eager: nothing was compared"
     torch.testing.assert_close(fused.action, eager.action, rtol=0, atol=1e-5)
     torch.testing.assert_close(fused.energy_end, eager.energy_end, rtol=1e-5, atol=1e-2)
@@ -67,8 +67,8 @@ def test_bfloat16_end_points_differ_by_far_less_than_the_chain_noise():
     diffs, moves = [], []
     for seed in range(3):
         critics, obs, mean, log_std, kw = _case(obs_dim=60, act_dim=2, batch=128, hidden=(256, 256, 256), seed=seed)
-        f32 = langevin_chain(critics, obs, mean, log_std, grad_clip=1000.0, **kw)
-        bf16 = langevin_chain(critics, obs, mean, log_std, grad_clip=1000.0, dtype="bfloat16", **kw)
+        f32 = chain(critics, obs, mean, log_std, grad_clip=1000.0, **kw)
+        bf16 = chain(critics, obs, mean, log_std, grad_clip=1000.0, dtype="bfloat16", **kw)
         diffs.append((bf16.action - f32.action).abs())
         moves.append(f32.displacement)
     diff = torch.cat([d.flatten() for d in diffs])
@@ -89,8 +89,8 @@ def test_a_failed_compile_falls_back_to_the_eager_path(monkeypatch, caplog):
     monkeypatch.setattr(fused_energy, "_compiled", broken)
     monkeypatch.setattr(fused_energy, "_compile_failed", False)
     with caplog.at_level(logging.WARNING, logger=fused_energy.__name__):
-        fused = langevin_chain(critics, obs, mean, log_std, fused=True, **kw)
-    eager = langevin_chain(critics, obs, mean, log_std, **kw)
+        fused = chain(critics, obs, mean, log_std, fused=True, **kw)
+    eager = chain(critics, obs, mean, log_std, **kw)
     assert fused_energy._compile_failed
     assert "no C++ compiler" in caplog.text
     torch.testing.assert_close(fused.action, eager.action, rtol=0, atol=1e-5)
@@ -99,4 +99,4 @@ def test_a_failed_compile_falls_back_to_the_eager_path(monkeypatch, caplog):
 def test_unknown_dtype_is_refused():
     critics, obs, mean, log_std, kw = _case()
     with pytest.raises(ValueError, match="float16.*accepted: float32 | bfloat16"):
-        langevin_chain(critics, obs, mean, log_std, dtype="float16", **kw)
+        chain(critics, obs, mean, log_std, dtype="float16", **kw)

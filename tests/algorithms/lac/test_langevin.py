@@ -7,8 +7,9 @@ import math
 
 import pytest
 import torch
+from conftest import chain
 
-from lac_rllib.algorithms.lac.langevin import INFORMATIVE, STARTS, langevin_chain, naive_langevin_chain, run_chain
+from lac_rllib.algorithms.lac.langevin import INFORMATIVE, STARTS, naive_langevin_chain, run_chain
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
 D64 = torch.float64
@@ -106,7 +107,7 @@ def test_efficient_chain_equals_naive(temperature, bounded, start, clip):
     nu = torch.tensor(0.7, dtype=D64) if bounded else 0.7
     mean, log_std = actor(obs)
     clip_kw = dict(grad_clip=clip[1], grad_clip_mode=clip[0]) if clip else {}
-    fast = langevin_chain(critics, obs, mean, log_std, steps=steps, step_size=eta,
+    fast = chain(critics, obs, mean, log_std, steps=steps, step_size=eta,
                           temperature=temperature, nu=nu, start=start, noise=noise, **bounds, **clip_kw)
     a0 = mean.detach() + log_std.detach().exp() * noise[0] if start == INFORMATIVE else noise[0]
     slow = naive_langevin_chain(critics, actor, obs, a0, steps=steps, step_size=eta,
@@ -126,7 +127,7 @@ def test_efficient_chain_equals_naive(temperature, bounded, start, clip):
 def test_chain_builds_no_parameter_gradients_and_detaches():
     critics, actor, obs = _nets()
     mean, log_std = actor(obs)  # carries a graph into the actor's parameters
-    res = langevin_chain(critics, obs, mean, log_std, steps=5, step_size=1e-2,
+    res = chain(critics, obs, mean, log_std, steps=5, step_size=1e-2,
                          temperature=0.1, nu=1.0, generator=torch.Generator().manual_seed(0))
     assert not res.action.requires_grad and res.action.grad_fn is None
     assert all(p.grad is None for p in [*critics.parameters(), *actor.parameters()])
@@ -137,7 +138,7 @@ def test_clamps_to_bounds_after_every_step():
     critics, actor, obs = _nets()
     mean, log_std = actor(obs)
     low, high = torch.tensor([-0.1, -0.2, 0.0], dtype=D64), 0.05
-    res = langevin_chain(critics, obs, mean, log_std, steps=4, step_size=0.5, temperature=1.0,
+    res = chain(critics, obs, mean, log_std, steps=4, step_size=0.5, temperature=1.0,
                          nu=0.0, low=low, high=high, generator=torch.Generator().manual_seed(0))
     a = res.action
     assert (a >= low).all() and (a <= high).all()
@@ -152,7 +153,7 @@ def test_start_distribution(start):
     obs = torch.zeros(n, OBS, dtype=D64)
     mean = torch.full((n, ACT), 2.0, dtype=D64)
     log_std = torch.full((n, ACT), math.log(0.3), dtype=D64)
-    res = langevin_chain(critics, obs, mean, log_std, steps=1, step_size=1e-12, temperature=1e6,
+    res = chain(critics, obs, mean, log_std, steps=1, step_size=1e-12, temperature=1e6,
                          nu=0.0, logp_weight=0.0, start=start,
                          generator=torch.Generator().manual_seed(0))
     exp_mean, exp_std = (2.0, 0.3) if start == INFORMATIVE else (0.0, 1.0)
@@ -206,7 +207,7 @@ def test_energy_decreases_from_informative_start():
     critics, actor, _ = _nets(seed=1)
     obs = torch.randn(512, OBS, generator=torch.Generator().manual_seed(1), dtype=D64)
     mean, log_std = actor(obs)
-    res = langevin_chain(critics, obs, mean, log_std, steps=30, step_size=1e-3, temperature=1e-3,
+    res = chain(critics, obs, mean, log_std, steps=30, step_size=1e-3, temperature=1e-3,
                          nu=0.5, generator=torch.Generator().manual_seed(0))
     drop = res.energy_end - res.energy_start
     assert drop.mean() < -5 * drop.std() / math.sqrt(drop.numel())  # significant, not noise
@@ -224,7 +225,7 @@ def test_bad_arguments_raise(bad, field):
     mean, log_std = actor(obs)
     kw = dict(steps=3, step_size=1e-3, temperature=0.1, nu=0.0) | bad
     with pytest.raises(ValueError, match=field):
-        langevin_chain(critics, obs, mean, log_std, **kw)
+        chain(critics, obs, mean, log_std, **kw)
     with pytest.raises(ValueError, match="noise"):
-        langevin_chain(critics, obs, mean, log_std, steps=3, step_size=1e-3, temperature=0.1,
+        chain(critics, obs, mean, log_std, steps=3, step_size=1e-3, temperature=0.1,
                        nu=0.0, noise=torch.zeros(3, B, ACT, dtype=D64))

@@ -6,7 +6,7 @@ import pytest
 import torch
 from ray.rllib.core.columns import Columns
 
-from lac_rllib.algorithms.lac.learner import LACTorchLearner, critic_targets
+from lac_rllib.algorithms.lac.learner import critic_targets
 from lac_rllib.constrained.costs import COSTS
 
 
@@ -50,17 +50,3 @@ def test_truncation_as_terminal_reproduces_authors_code():
                               _cfg(bootstrap_on_truncation=False))
     assert y_r[1] == 10.0 and y_c[1] == 0.5
     assert y_r[0] == pytest.approx(10.0 + 0.9 * 2.0)
-
-
-@pytest.mark.parametrize("nu,cost,limit,lr,expected", [
-    (0.0, 30.0, 25.0, 0.01, 0.05),   # over the limit: ν rises by α(Ĵ − b)
-    (1.0, 20.0, 25.0, 0.01, 0.95),   # under the limit: ν falls
-    (0.01, 0.0, 25.0, 0.01, 0.0),    # projection at 0
-    (0.5, 25.0, 25.0, 0.01, 0.5),    # at the limit: unchanged
-])
-def test_lagrange_step(nu, cost, limit, lr, expected):
-    assert float(LACTorchLearner.lagrange_step(nu, cost, limit, lr)) == pytest.approx(expected)
-
-
-def test_lagrange_step_upper_bound():
-    assert float(LACTorchLearner.lagrange_step(1.9, 100.0, 25.0, 0.01, nu_max=2.0)) == 2.0

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import tiny_config
 
-from lac_rllib.algorithms.lac.algorithm import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU
+from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU
 from lac_rllib.tasks.point_hazard import PointHazardEnv
 
 # One worker runs this module: its module-scoped fixture is expensive (pytest-xdist, --dist loadgroup).

@@ -74,8 +74,6 @@ def test_forward_equals_independent_mlps(activation):
     x = torch.cat([obs, act], -1)
     for e in range(4):
         torch.testing.assert_close(q[e], _member_as_sequential(ens, e)(x).squeeze(-1))
-    torch.testing.assert_close(ens.q_reward(obs, act), q[:2])
-    torch.testing.assert_close(ens.q_cost(obs, act), q[2:])
     # The named rows are views of q (no copy): [:n_reward] reward critics, [n_reward:] cost critics.
     assert reward_rows(q, 2).data_ptr() == q.data_ptr() and torch.equal(reward_rows(q, 2), q[:2])
     assert cost_rows(q, 2).data_ptr() == q[2:].data_ptr() and torch.equal(cost_rows(q, 2), q[2:])
@@ -86,7 +84,8 @@ def test_projection_then_q_equals_forward():
     obs, act = _inputs()
     proj = ens.project_state(obs)
     assert proj.shape == (4, 7, HID[0])
-    torch.testing.assert_close(ens.q_from_projection(proj, act), ens(obs, act))
+    q, _ = ens.q_and_action_grad(proj, act, torch.zeros(4, 7))  # the chain's path to Q
+    torch.testing.assert_close(q, ens(obs, act))
 
 
 @pytest.mark.parametrize("activation", ["mish", "tanh", "relu"])

@@ -1,0 +1,123 @@
+"""SafeAlgorithm: what every constrained algorithm here does around its own ``training_step``.
+
+- registers its task's env in every Ray process;
+- writes the lac-rllib keys into the checkpoint's ``rllib_checkpoint.json`` (version, format,
+  algorithm, task, cost convention, config), which ``lac_rllib.evaluation`` checks;
+- reseeds a restored run from (seed, iteration) so it does not replay its first iteration;
+- reports the top-level result keys of ``lac_rllib.constrained.metrics`` every iteration.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+
+import numpy as np
+from ray.rllib.algorithms.algorithm import Algorithm
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.utils.annotations import override
+from ray.rllib.utils.debug import update_global_seed_if_necessary
+from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, LEARNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+from lac_rllib.constrained.metrics import (
+    COST_LIMIT,
+    ENV_STEPS,
+    EPISODE_COST,
+    EPISODE_RETURN,
+    EPISODES_THIS_ITER,
+    FEASIBLE,
+    NU,
+)
+from lac_rllib.constrained.task_config import register_task_env
+
+#: Version of the lac-rllib keys in a checkpoint's rllib_checkpoint.json (lac_rllib.evaluation reads
+#: this one only). 2: the classes moved to lac_rllib.algorithms / lac_rllib.constrained (0.2.0).
+CHECKPOINT_FORMAT = 2
+
+
+def resume_seed(seed: int, iteration: int) -> int:
+    """The seed of a run restored at ``iteration`` (see SafeAlgorithm._reseed_for_restore): a hash of
+    both, below 2**31 with room for RLlib's + worker index, so (seed, iteration) pairs do not share streams."""
+    return int(np.random.SeedSequence([seed, iteration]).generate_state(1)[0]) % (2**31 - 2**16)
+
+
+class SafeAlgorithm(Algorithm):
+    """Base of the constrained algorithms; a subclass names itself in ``ALGO`` and implements
+    ``training_step``, calling :meth:`log_top_level` at its end."""
+
+    #: The algorithm's name in checkpoints and runs.
+    ALGO = ""
+
+    @override(Algorithm)
+    def setup(self, config) -> None:
+        if config.task_id:
+            register_task_env(config.task_id)
+        super().setup(config)
+        self._last_episode_stats = (float("nan"), float("nan"))
+
+    @override(Algorithm)
+    def get_metadata(self) -> dict:
+        """RLlib writes this into the checkpoint's ``rllib_checkpoint.json``; lac_rllib.evaluation
+        checks the version and format and reads the task and config."""
+        cfg = self.config
+        ours = {
+            "lac_rllib_version": importlib.metadata.version("lac-rllib"),
+            "checkpoint_format": CHECKPOINT_FORMAT,
+            "algo": self.ALGO,
+            "task_id": cfg.task_id,
+            "seed": cfg.seed,
+            "cost_limit": cfg.effective_cost_limit,
+            "episode_cost_discount": cfg.effective_episode_cost_discount,
+            "lac_config": cfg.lac_params(),
+        }
+        # JSON-safe (tuples -> lists, anything exotic -> str).
+        return {**super().get_metadata(), **json.loads(json.dumps(ours, default=str))}
+
+    @override(Algorithm)
+    def restore_from_path(self, path, *args, **kwargs) -> None:
+        super().restore_from_path(path, *args, **kwargs)
+        self._reseed_for_restore()
+
+    def _reseed_for_restore(self) -> None:
+        """Fresh random streams for a run restored at iteration k.
+
+        RLlib's checkpoints hold no RNG state: a restored run (``lac-train --resume``, a Tune
+        trial restored after a failure or ``sweeps/run.py --resume``) seeds its envs, action
+        sampling and torch/numpy as at iteration 0, so its next iteration replays iteration 1's
+        random stream: the same env layouts and, in the random phase, the very same transitions
+        added to the buffer a second time. Seeding from (seed, k) instead keeps a restored run
+        reproducible without repeating data. The streams differ from those of an uninterrupted
+        run (which continues its own), so a resumed run is a different draw of the same seed
+        (docs/dependencies.md, "Checkpoints and random streams").
+        """
+        if self.config.seed is None:
+            return
+        seed = resume_seed(self.config.seed, self.iteration)
+
+        def reseed(runner) -> None:
+            # RLlib's SingleAgentEnvRunner seeds its envs with its private ``_seed`` at the reset
+            # that ``_needs_initial_reset`` asks for, and has no public way to reseed
+            # (docs/dependencies.md; tests/constrained/test_algorithm.py breaks if that changes).
+            # Every runner gets seed + worker index, as at construction.
+            runner._seed = seed + (runner.worker_index or 0)
+            runner._needs_initial_reset = True
+            update_global_seed_if_necessary(runner.config.framework_str, runner._seed)
+
+        self.env_runner_group.foreach_env_runner(reseed, local_env_runner=True)
+        self.learner_group.foreach_learner(lambda learner: update_global_seed_if_necessary("torch", seed))
+
+    def log_top_level(self, returns: list[float], costs: list[float]) -> None:
+        """episode_return / episode_cost: means over the episodes completed this iteration
+        (the last known values carry over an iteration in which none completed); ν is the
+        default module's, as its learner logged it."""
+        if returns:
+            self._last_episode_stats = (float(np.mean(returns)), float(np.mean(costs)))
+        ret, cost = self._last_episode_stats
+        limit = self.config.effective_cost_limit
+        nu = self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, NU), default=float("nan"))
+        for key, value in {
+            EPISODE_RETURN: ret, EPISODE_COST: cost, COST_LIMIT: limit,
+            FEASIBLE: float(cost <= limit), NU: float(nu), EPISODES_THIS_ITER: len(returns),
+            ENV_STEPS: self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0),
+        }.items():
+            self.metrics.log_value(key, value, window=1)

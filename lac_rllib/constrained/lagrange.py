@@ -1,0 +1,167 @@
+"""The Lagrange multiplier ν of a constrained algorithm, as one object (docs/spec.md §4).
+
+A :class:`LagrangeMultiplier` owns ν's update: the projected step of eq. (14),
+
+    ν ← min( ν_max, max(0, ν + α_ν·(Ĵ_C − b)) ),
+
+with the step itself pluggable (a :class:`StepRule`: eq. (14)'s gradient step, OmniSafe's Adam
+step, FSRL's PID controller; docs/spec.md §4), the authors' adaptive bound ν_max
+(:class:`AdaptiveBound`, [C]) or none, and its checkpoint state. Its *value* is the RLModule's ν
+buffer, which the multiplier is the only writer of: the buffer travels with the module's weights,
+so env runners, checkpoints and a restored policy (``--actions langevin``) all see the same ν.
+
+Plain torch, no RLlib: the learners call it (``lac_rllib.algorithms.lac.learner``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+import torch
+
+
+class StepRule(Protocol):
+    """One step of ν from the episode cost: returns the new ν *before* the projection onto
+    [0, ν_max] (the multiplier projects)."""
+
+    def step(self, nu: float, episode_cost: float, cost_limit: float) -> float: ...
+
+    def get_state(self) -> dict: ...
+
+    def set_state(self, state: dict) -> None: ...
+
+
+class GradientStep:
+    """Eq. (14): ν + α_ν·(Ĵ_C − b), gradient ascent on the Lagrangian in ν [P, C]."""
+
+    def __init__(self, lr: float):
+        self.lr = float(lr)
+
+    def step(self, nu: float, episode_cost: float, cost_limit: float) -> float:
+        return nu + self.lr * (episode_cost - cost_limit)
+
+    def get_state(self) -> dict:
+        return {}
+
+    def set_state(self, state: dict) -> None:
+        pass
+
+
+class AdamStep:
+    """OmniSafe's ``common/lagrange.py``: Adam on the loss −ν·(Ĵ_C − b), i.e. on the gradient
+    g = −(Ĵ_C − b), with torch.optim.Adam's update (bias-corrected moments m, v over t steps)."""
+
+    def __init__(self, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8):
+        self.lr, self.betas, self.eps = float(lr), (float(betas[0]), float(betas[1])), float(eps)
+        self.m, self.v, self.t = 0.0, 0.0, 0
+
+    def step(self, nu: float, episode_cost: float, cost_limit: float) -> float:
+        b1, b2 = self.betas
+        g = -(episode_cost - cost_limit)
+        self.t += 1
+        self.m = b1 * self.m + (1 - b1) * g
+        self.v = b2 * self.v + (1 - b2) * g * g
+        # torch.optim.Adam: ν − (lr / (1 − β₁ᵗ))·m / (√v / √(1 − β₂ᵗ) + ε)
+        denom = math.sqrt(self.v) / math.sqrt(1 - b2**self.t) + self.eps
+        return nu - self.lr / (1 - b1**self.t) * self.m / denom
+
+    def get_state(self) -> dict:
+        return {"m": self.m, "v": self.v, "t": self.t}
+
+    def set_state(self, state: dict) -> None:
+        self.m, self.v, self.t = float(state["m"]), float(state["v"]), int(state["t"])
+
+
+class PIDStep:
+    """FSRL's PID Lagrangian (``utils/optim_util.py``, after Stooke et al. 2020): with the error
+    e = Ĵ_C − b, I ← [I + e]₊ and ν = [k_p·e + k_i·I + k_d·[e − e_prev]₊]₊ (the rule sets ν itself,
+    whatever ν was)."""
+
+    def __init__(self, kp: float, ki: float, kd: float):
+        self.kp, self.ki, self.kd = float(kp), float(ki), float(kd)
+        self.integral, self.previous_error = 0.0, 0.0
+
+    def step(self, nu: float, episode_cost: float, cost_limit: float) -> float:
+        error = episode_cost - cost_limit
+        self.integral = max(0.0, self.integral + error)
+        derivative = max(0.0, error - self.previous_error)
+        self.previous_error = error
+        return self.kp * error + self.ki * self.integral + self.kd * derivative
+
+    def get_state(self) -> dict:
+        return {"integral": self.integral, "previous_error": self.previous_error}
+
+    def set_state(self, state: dict) -> None:
+        self.integral, self.previous_error = float(state["integral"]), float(state["previous_error"])
+
+
+class AdaptiveBound:
+    """[C]'s upper bound on ν, from the iteration's mean critic targets ȳ_R, ȳ_C (docs/spec.md §4):
+
+        ν_max = 2                                   until the first iteration ends,
+        ν_max = 2·|ȳ_R| / max(|ȳ_C|, 1e-8)          after each iteration,
+
+    so the cost term of the chain's energy cannot outweigh the reward term while the reward
+    critic is still small. ȳ are means over *every* minibatch of the iteration (:meth:`observe`
+    each one), not the last one's."""
+
+    def __init__(self, initial: float = 2.0, ratio: float = 2.0):
+        self.value, self.ratio = float(initial), float(ratio)
+        self._sums = torch.zeros(3)  # Σ y_R, Σ y_C, count over the current iteration
+
+    def start_iteration(self) -> None:
+        self._sums.zero_()
+
+    def observe(self, y_r: torch.Tensor, y_c: torch.Tensor) -> None:
+        self._sums += torch.stack([y_r.sum(), y_c.sum(), torch.tensor(float(len(y_r)))])
+
+    def end_iteration(self) -> tuple[float, float] | None:
+        """Set the next bound; returns (ȳ_R, ȳ_C), or None if no minibatch was observed."""
+        if self._sums[2] == 0:
+            return None
+        mean_r, mean_c = (self._sums[:2] / self._sums[2]).tolist()
+        self.value = self.ratio * abs(mean_r) / max(abs(mean_c), 1e-8)
+        return mean_r, mean_c
+
+    def get_state(self) -> dict:
+        return {"value": self.value, "sums": self._sums.tolist()}
+
+    def set_state(self, state: dict) -> None:
+        self.value, self._sums = float(state["value"]), torch.tensor(state["sums"])
+
+
+class LagrangeMultiplier:
+    """ν ≥ 0 of one constrained module: ``value`` is its RLModule's ν buffer (a 0-d tensor) and
+    this object its only writer. ``rule`` makes the step, ``bound`` tracks ȳ and, when
+    ``bounded``, caps ν at its ν_max; ``bounded=False`` is eq. (14) as [P] writes it."""
+
+    def __init__(self, value: torch.Tensor, *, cost_limit: float, rule: StepRule, bound: AdaptiveBound | None = None,
+                 bounded: bool = True):
+        self._value, self.cost_limit, self.rule = value, float(cost_limit), rule
+        self.bound, self.bounded = bound or AdaptiveBound(), bool(bounded)
+
+    @property
+    def value(self) -> float:
+        return float(self._value)
+
+    @property
+    def upper(self) -> float | None:
+        """The bound ν is held under now (None: unbounded)."""
+        return self.bound.value if self.bounded else None
+
+    def step(self, episode_cost: float | None) -> float:
+        """One projected step from Ĵ_C = ``episode_cost``; None (no episode completed) leaves ν."""
+        if episode_cost is not None:
+            nu = max(0.0, self.rule.step(self.value, float(episode_cost), self.cost_limit))
+            upper = self.upper
+            self._value.fill_(min(nu, upper) if upper is not None else nu)
+        return self.value
+
+    def get_state(self) -> dict:
+        """The step rule's and the bound's state (ν itself is in the module's weights)."""
+        return {"rule": self.rule.get_state(), "bound": self.bound.get_state()}
+
+    def set_state(self, state: dict) -> None:
+        self.rule.set_state(state["rule"])
+        self.bound.set_state(state["bound"])

@@ -1,0 +1,112 @@
+"""The safe-task part of every constrained algorithm's config: which task, its cost convention and
+limit, the observation filter, the episode-cost callback (docs/spec.md §5-6).
+
+An algorithm's params dataclass extends :class:`SafeTaskParams`; its config class mixes
+:class:`SafeTaskConfig` in before RLlib's ``AlgorithmConfig`` and declares its ``PRESETS``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any
+
+from ray.tune.registry import register_env
+
+from lac_rllib.constrained.costs import EpisodeCostCallback
+from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, or_none, param
+from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
+from lac_rllib.tasks import get_task
+
+
+@dataclasses.dataclass
+class SafeTaskParams:
+    """The fields every constrained algorithm has: the task's cost convention and the observation filter."""
+
+    # --- task ---
+    cost_limit: float | None = param(None, accepts=or_none(NON_NEGATIVE))
+    """b; None = the task's limit (docs/spec.md §6)."""
+    episode_cost_discount: float | None = param(None, accepts=or_none(FRACTION))
+    """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
+
+    # --- observation filter ---
+    obs_normalization: bool = param(True, accepts=BOOL)
+    """Running mean/std observation filter [C]; its state is checkpointed."""
+    obs_clip: float = param(5.0, accepts=POSITIVE)
+    """Clip of the normalised observation [C]."""
+    obs_std_floor: float = param(1e-2, accepts=NON_NEGATIVE)
+    """The filter divides by max(std, obs_std_floor) [C], so a near-constant observation
+    dimension is not blown up to ±obs_clip; 0 = RLlib's std + 1e-8."""
+
+
+def make_task_env(env_config, task_id: str):
+    return get_task(task_id).make(env_config)
+
+
+def register_task_env(task_id: str) -> None:
+    """Make ``task_id`` resolvable by RLlib env runners in every Ray process."""
+    register_env(task_id, functools.partial(make_task_env, task_id=task_id))
+
+
+class SafeTaskConfig:
+    """Mixed into an ``AlgorithmConfig`` subclass (before it): ``.task(id)``, the derived cost
+    limit and discount, the observation filter and the episode-cost callback.
+
+    The subclass declares ``PRESETS`` (preset name → field values; a task names its preset) and
+    sets its params' defaults in ``__init__``."""
+
+    #: Preset name → the field values it sets (docs/spec.md §5).
+    PRESETS: dict[str, dict[str, Any]] = {}
+
+    def __init__(self, algo_class=None):
+        super().__init__(algo_class=algo_class)
+        self.task_id: str | None = None
+        self.num_env_runners = 0  # sample in the driver unless asked
+        # Wait for the runners: an iteration needs all its env steps, and RLlib's 60 s default
+        # silently drops a runner that needs longer (20k/K navigation steps at ~700 steps/s
+        # already do), leaving the iteration short of data. A dead runner is found by RLlib's
+        # fault tolerance, not by this timeout.
+        self.sample_timeout_s = None
+        self.callbacks_class = EpisodeCostCallback
+
+    def task(self, task_id: str, *, preset: str | None = None):
+        """Train on a registered safe task: its preset (or ``preset``), then the task's own
+        overrides, then the env. Explicit ``training(...)`` values set afterwards win over both."""
+        spec = get_task(task_id)  # unknown id -> ValueError listing the known ones
+        name = preset or spec.preset
+        if name not in self.PRESETS:
+            raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(self.PRESETS)}")
+        self.task_id = task_id
+        self.training(**{**self.PRESETS[name], **spec.overrides})
+        register_task_env(task_id)
+        self.environment(env=task_id)
+        return self
+
+    @property
+    def task_spec(self):
+        return get_task(self.task_id) if self.task_id else None
+
+    @property
+    def effective_cost_limit(self) -> float:
+        """b: ``cost_limit`` if set, else the task's limit."""
+        if self.cost_limit is not None:
+            return float(self.cost_limit)
+        if self.task_spec is None:
+            raise ValueError("cost_limit is unset and no task is set: call .task(id) or set it")
+        return float(self.task_spec.cost_limit)
+
+    @property
+    def effective_episode_cost_discount(self) -> float:
+        """γ_C of Ĵ_C: ``episode_cost_discount`` if set, else the task's convention (1 without a task)."""
+        if self.episode_cost_discount is not None:
+            return float(self.episode_cost_discount)
+        return float(self.task_spec.episode_cost_discount) if self.task_spec else 1.0
+
+    def build_env_to_module_connector(self, env=None, spaces=None, device=None):
+        pipeline = super().build_env_to_module_connector(env=env, spaces=spaces, device=device)
+        if self.obs_normalization:
+            # Running mean/std, clipped [C]. It writes the normalised observation back into
+            # the episode, so replay and learner see what the actor saw; its state is part of
+            # the env runners' state, hence of every checkpoint.
+            pipeline.prepend(FlooredMeanStdFilter(clip_by_value=self.obs_clip, std_floor=self.obs_std_floor))
+        return pipeline
