@@ -82,7 +82,8 @@ def config_markdown() -> str:
 
     out += ["", "## Tasks", "",
             "The registered tasks (`lac_rllib/tasks/`; spec.md §6): the preset each applies, its own overrides,",
-            "where its per-step cost comes from, the cost limit b and the discount of its episode cost Ĵ_C (1 = a plain sum).",
+            "where its per-step cost comes from, the cost limit b and the discount of its episode cost Ĵ_C",
+            "(1 = a plain sum).",
             "", "| task | preset | overrides | cost per step | cost limit | episode cost discount |",
             "|---|---|---|---|---|---|"]
     for task_id in known_tasks():

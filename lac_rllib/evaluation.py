@@ -13,7 +13,7 @@ this process, without ``ray.init``:
   ``MeanStdFilter`` (running mean/std + clip, docs/spec.md §5) is swapped for a frozen twin
   (``update_stats=False``) holding the same state, so evaluation never moves the statistics;
 * the task id and the LAC config fields from the checkpoint's ``rllib_checkpoint.json``,
-  which ``LAC.get_metadata`` fills (``checkpoint_format`` 1). The lac-rllib major.minor
+  which ``SafeAlgorithm.get_metadata`` fills (``checkpoint_format`` 2). The lac-rllib major.minor
   version and the format must match the installed ones.
 
 ``evaluate(policy, episodes, seed, actions=...)`` runs ``episodes`` episodes, episode ``i``
@@ -45,8 +45,10 @@ from typing import Any
 import numpy as np
 import torch
 
-#: The ``checkpoint_format`` this module reads (written by ``LAC.get_metadata``).
-SUPPORTED_CHECKPOINT_FORMAT = 1
+from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
+
+#: The ``checkpoint_format`` this module reads (lac_rllib.constrained.algorithm writes it).
+SUPPORTED_CHECKPOINT_FORMAT = CHECKPOINT_FORMAT
 ACTION_MODES = ("generator", "langevin")
 #: The RLlib algorithm checkpoint's metadata file (``Algorithm.METADATA_FILE_NAME``).
 ALGO_METADATA_FILE = "rllib_checkpoint.json"
@@ -176,7 +178,7 @@ def _restore_module(module_dir: str):
         module.restore_from_path(module_dir)
     except CheckpointError:
         raise
-    except Exception as e:  # noqa: BLE001 (unpickling/IO errors of every kind)
+    except Exception as e:  # unpickling/IO errors of every kind
         raise CheckpointError(f"corrupt checkpoint: cannot restore the RLModule from {module_dir} "
                               f"({one_line(e)})") from None
     tensors = list(module.named_parameters()) + list(module.named_buffers())
@@ -214,7 +216,7 @@ def _restore_env_to_module(pipeline_dir: str):
             pipeline.remove(cls)
     except CheckpointError:
         raise
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:  # connector unpickling/IO errors of every kind
         raise CheckpointError(f"corrupt checkpoint: cannot restore the observation filter from "
                               f"{pipeline_dir} ({one_line(e)})") from None
     return pipeline, frozen
@@ -318,7 +320,7 @@ def _video_env(policy: Policy):
         frame = env.render()
         if not isinstance(frame, np.ndarray) or frame.ndim != 3:
             raise RuntimeError(f"render() returned {type(frame).__name__}")
-    except Exception as e:  # noqa: BLE001 (every GL failure mode)
+    except Exception as e:  # every GL failure mode
         return None, (f"cannot render {policy.task_id} offscreen here (MUJOCO_GL="
                       f"{os.environ.get('MUJOCO_GL')}: {one_line(e)[:160]}); continuing without video")
     return env, None

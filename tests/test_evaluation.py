@@ -50,7 +50,7 @@ def test_checkpoint_metadata_written_by_lac(checkpoint):
 
     meta = json.loads(open(os.path.join(checkpoint, "rllib_checkpoint.json")).read())
     assert meta["lac_rllib_version"] == version("lac-rllib")
-    assert meta["checkpoint_format"] == 1
+    assert meta["checkpoint_format"] == 2
     assert meta["task_id"] == TASK
     assert meta["cost_limit"] == 2.0 and meta["episode_cost_discount"] == 1.0
     assert meta["lac_config"]["env_steps_per_iteration"] == 500
@@ -215,7 +215,7 @@ def test_patch_version_difference_is_accepted(ckpt_copy):
 
 
 def test_format_mismatch(ckpt_copy):
-    _edit_metadata(ckpt_copy, checkpoint_format=2)
+    _edit_metadata(ckpt_copy, checkpoint_format=1)
     with pytest.raises(CheckpointError, match="unsupported checkpoint format 2"):
         restore_policy(str(ckpt_copy))
 

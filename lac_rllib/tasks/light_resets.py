@@ -39,7 +39,7 @@ class _AssetsYaml:
         self.FullLoader = yaml_module.FullLoader
         self._cache: dict[tuple[str, Any], Any] = {}
 
-    def load(self, stream, Loader):  # noqa: N803  (yaml's own signature)
+    def load(self, stream, Loader):  # yaml's own signature (Loader)
         key = (getattr(stream, "name", None), Loader)
         if key[0] is None:
             return self._yaml.load(stream, Loader=Loader)

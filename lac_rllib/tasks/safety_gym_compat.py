@@ -189,7 +189,7 @@ class _Placeholder:
 def _lenient_ndarray_dataclass_defaults() -> Iterator[None]:
     original = dataclasses._get_field  # type: ignore[attr-defined]
 
-    def _get_field(cls, a_name, a_type, *args, **kwargs):  # noqa: ANN001, ANN202
+    def _get_field(cls, a_name, a_type, *args, **kwargs):
         default = getattr(cls, a_name, dataclasses.MISSING)
         if not (
             isinstance(default, np.ndarray)
@@ -262,7 +262,7 @@ def _patch_car_joint_ids() -> None:
     if getattr(original, "_lac_rllib_patched", False):
         return
 
-    def _init_jnt_sensors(self) -> None:  # noqa: ANN001
+    def _init_jnt_sensors(self) -> None:
         engine = self.engine
         model = engine.model
         engine.model = _IntJointIdModel(model)
@@ -293,7 +293,7 @@ def _patch_offscreen_viewer() -> None:
     class SizedOffScreenViewer(OffScreenViewer):
         _lac_rllib_patched = True
 
-        def __init__(self, model, data, width=None, height=None, **kwargs):  # noqa: ANN001
+        def __init__(self, model, data, width=None, height=None, **kwargs):
             super().__init__(model, data, width or model.vis.global_.offwidth,
                              height or model.vis.global_.offheight, **kwargs)
 

@@ -246,7 +246,7 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         super().validate()
         for name, value in self.lac_params().items():
             check_field(name, value)
-        self.effective_cost_limit  # noqa: B018  (raises if undefined)
+        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
         if self.lr_schedule == "linear" and self.total_env_steps is None:
             raise ValueError(
                 "LAC config field total_env_steps=None is invalid with lr_schedule='linear' (the decay "

@@ -130,7 +130,7 @@ def make_grad_fn(critics, proj: torch.Tensor, mean: torch.Tensor, log_std: torch
         if fn is not None:
             try:
                 return fn(a, *args, **kw)
-            except Exception as e:  # noqa: BLE001  (Inductor raises many kinds; the eager path is exact)
+            except Exception as e:  # Inductor raises many kinds; the eager path is exact
                 _compile_failed = True
                 logger.warning("torch.compile of the Langevin step failed (%s: %s); the chain runs eagerly",
                                type(e).__name__, str(e).splitlines()[0] if str(e) else "")
