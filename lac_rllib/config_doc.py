@@ -1,4 +1,4 @@
-"""docs/config.md, generated from ``lac_rllib/config.py`` so it cannot drift from the code.
+"""docs/config.md, generated from ``lac_rllib/algorithms/lac/config.py`` so it cannot drift from the code.
 
 Regenerate with ``python -m lac_rllib.config_doc > docs/config.md`` (tests/test_docs.py checks it).
 Fields are grouped by the ``# --- group ---`` comments of :class:`LACParams`, in source order.
@@ -53,7 +53,7 @@ def config_markdown() -> str:
     out = [
         "# LAC configuration fields",
         "",
-        f"*Generated from `lac_rllib/config.py`: do not edit; regenerate with `{REGENERATE}`.*",
+        f"*Generated from `lac_rllib/algorithms/lac/config.py`: do not edit; regenerate with `{REGENERATE}`.*",
         "",
         "Every field of `LACParams`, with its default, the values it accepts and its docstring. Set a field with",
         "`LACConfig().training(name=value)`, `lac-train --set name=value` or the sweep's `--set name=value`.",
@@ -69,7 +69,7 @@ def config_markdown() -> str:
     touched = [n for n in defaults if any(n in p for p in PRESETS.values())]
     out += [
         "", "## Presets", "",
-        "`LACConfig().task(id)` applies the task's preset (`PRESETS` in `lac_rllib/config.py`), then the",
+        "`LACConfig().task(id)` applies the task's preset (`PRESETS` in `lac_rllib/algorithms/lac/config.py`), then the",
         "task's own overrides (next table); explicit `training(...)` values win over both. An empty cell",
         "keeps the default.",
         "",

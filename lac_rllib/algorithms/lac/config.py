@@ -22,7 +22,7 @@ from ray.rllib.connectors.learner import (
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.lac.fused_energy import DTYPES as LANGEVIN_DTYPES
+from lac_rllib.algorithms.lac.energy import DTYPES as LANGEVIN_DTYPES
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
@@ -70,24 +70,23 @@ class LACParams(SafeTaskParams):
     langevin_clamp: bool = param(True, accepts=BOOL)
     """Clamp ã to the action bounds after every step [C]."""
     langevin_grad_clip: float | None = param(1000.0, accepts=or_none(POSITIVE))
-    """Clip of ∇_a E at every chain step [C: 1000]; None = off. Measured on SafetyPointGoal1 at the
-    paper's sizes (λ = 1e-3): it never bound up to 360k env steps (langevin_clip_fraction 0,
-    docs/fidelity/); whether it binds later in a run is open. With it and the ν bound off, a review
-    measured 66-98% of chain end points pinned at the action bound by 860k steps (docs/spec.md §1)."""
+    """Clip of ∇_a E at every chain step [C: 1000]; None = off. On by default because [C] clips and
+    the clip shapes where the chain's end points land late in a run (when it binds and what it
+    prevents: docs/spec.md §1, docs/fidelity/)."""
     langevin_grad_clip_mode: str = param("batch", accepts=one_of(CLIP_MODES))
     """"batch": one L2 norm over the whole minibatch's ∇_a E (B × A) [C]; "per_sample": each
     sample's gradient clipped to langevin_grad_clip/√B, the same step when gradients are alike
     without coupling unrelated samples [D]."""
     langevin_fused: bool = param(True, accepts=BOOL)
     """Each chain step's energy gradient through torch.compile, which fuses the element-wise work
-    of every critic layer [D]: same maths to float rounding, the chain ~1.3-1.5x faster at the
-    paper's sizes, for a one-off compile of ~15-40 s per process (README, speed). False: the eager
-    hand-written backward. Falls back to it, with a warning, where compiling fails."""
+    of every critic layer [D]: the same maths to float rounding, faster at the paper's sizes for a
+    one-off compile per process (figures: docs/speed.md). False: the eager hand-written backward;
+    it is also the fallback, with a warning, where compiling fails."""
     langevin_dtype: str = param("float32", accepts=one_of(LANGEVIN_DTYPES))
     """Input dtype of the chain's critic matmuls: "float32" | "bfloat16" (action, energy and update
-    stay float32) [D]. bfloat16 pays only on CPUs with native bf16 matmuls (AVX512-BF16, AMX);
-    on AVX2-only CPUs it is far slower. Its end points differ from float32's by far less than the
-    chain's own noise (tests/test_fused_energy.py)."""
+    stay float32) [D]. float32 by default: bfloat16 pays only on CPUs with native bf16 matmuls
+    (AVX512-BF16, AMX) and is far slower elsewhere (docs/speed.md); its end points differ from
+    float32's by far less than the chain's own noise (tests/algorithms/lac/test_energy.py)."""
 
     # --- critics (docs/spec.md §2, eqs. 12-13) ---
     cost_gamma: float = param(0.99, accepts=FRACTION)
@@ -159,9 +158,8 @@ class LACParams(SafeTaskParams):
     """Envs each env runner steps together (RLlib's own field, a gymnasium SyncVectorEnv) [D]:
     RLlib's per-step work (connectors, episode bookkeeping) is then paid once per batch of envs
     instead of once per step. The policy is fixed within an iteration, so this changes only which
-    episode segments an iteration holds. The presets choose counts that keep the episodes of an
-    iteration what one env gives: 1000-step episodes, 20k steps over 10 envs (safety_gym) and 5k
-    over 5 (mujoco) complete 20 and 5 whole episodes per iteration. docs/speed.md has the figures."""
+    episode segments an iteration holds; the presets choose counts whose iterations still complete
+    whole episodes (docs/speed.md, with the figures)."""
     random_iterations: int = param(5, accepts=INT_GE_0)
     """Iterations that act uniformly at random before the generator takes over [C]."""
     store_replay_buffer: bool = param(True, accepts=BOOL)
@@ -169,18 +167,14 @@ class LACParams(SafeTaskParams):
     or retried run trains on the data it had, not on an empty buffer; False keeps checkpoints
     small (a full PointGoal1 buffer is tens of MB)."""
     torch_threads: int = param(1, accepts=INT_GE_1)
-    """Intra-op torch threads of the learner process [D]: minibatch tensors are small, and on a
-    shared 2-core machine 2 threads made one critic-gradient op ~250x slower than 1 (measured).
-    A sweep sets it to the CPUs of a trial."""
+    """Intra-op torch threads of the learner process [D]: 1, because minibatch tensors are small and
+    extra threads only add synchronisation on a shared machine (docs/speed.md). A sweep sets it to
+    the CPUs of a trial."""
 
 
-# Table 4 (MuJoCo) and Table 5 (Safety Gym). "tiny" [D] sizes lac/PointHazard-v0 to learn in
-# about a minute on 2 cores: small nets, short chains, and α_ν = 0.03 because its cost limit (2)
-# is ten times smaller than Safety Gym's (25); with 0.01 ν took ~40k steps to matter, with 0.1 it
-# overshot and the agent froze (measured on seeds 0 and 1). No chain clip: a T = 10 chain under
-# the batch-wide clip of 1000 is clipped at every step and moves an action ~0.08, and in 45k steps
-# nothing is learned (seed 0: return −9.5, random −10.1); unclipped, the same run ends at return
-# −0.9 and cost 0 (limit 2). The clip's effect at the paper's sizes is in docs/fidelity/.
+# Table 4 (MuJoCo) and Table 5 (Safety Gym), docs/spec.md §5. "tiny" [D] sizes lac/PointHazard-v0
+# to learn in about a minute on 2 cores: small nets, short chains, a larger α_ν for its ten times
+# smaller cost limit, no chain clip (why each, measured: docs/spec.md §5, "The tiny preset").
 PRESETS: dict[str, dict[str, Any]] = {
     "mujoco": {"env_steps_per_iteration": 5000, "num_envs_per_env_runner": 5},
     "safety_gym": {"env_steps_per_iteration": 20_000, "num_envs_per_env_runner": 10},

@@ -26,7 +26,7 @@ from typing import Callable
 
 import torch
 
-from lac_rllib.algorithms.lac.fused_energy import DTYPES, make_grad_fn
+from lac_rllib.algorithms.lac.energy import DTYPES, eager_grad_fn, make_grad_fn
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, cost_rows, reward_rows
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
@@ -126,40 +126,6 @@ def run_chain(grad_fn: GradFn, a0: torch.Tensor, *, steps: int, step_size: float
                        clip_fraction=clipped_sum / steps, at_bound=on_bound.to(a.dtype).mean())
 
 
-def lac_energy_and_grad(critics: CriticEnsemble, proj: torch.Tensor, mean: torch.Tensor,
-                        log_std: torch.Tensor, *, temperature: float, nu,
-                        logp_weight: float) -> GradFn:
-    """grad_fn for the LAC energy; ``proj``/``mean``/``log_std`` are fixed along the chain."""
-    nr = critics.n_reward
-    inv_lam = 1.0 / temperature
-    nu = torch.as_tensor(nu, dtype=mean.dtype, device=mean.device)
-    mean, log_std = mean.detach(), log_std.detach()
-    inv_var = torch.exp(-2.0 * log_std)
-    # −w·log π(a) = w·(½ Σ (a−μ)²/σ² + Σ log σ + (A/2)·log 2π); the a-free part is hoisted.
-    logp_const = logp_weight * (log_std.sum(-1) + 0.5 * mean.shape[-1] * math.log(2 * math.pi))
-    cols = torch.arange(mean.shape[0], device=mean.device)
-
-    def coef_of(q: torch.Tensor) -> torch.Tensor:
-        # min/max are piecewise: the (sub)gradient flows through the selected member only,
-        # −1/λ on the argmin reward critic and +ν/λ on the argmax cost critic, per sample.
-        c = torch.zeros_like(q)
-        c[reward_rows(q, nr).argmin(0), cols] = -inv_lam
-        if critics.n_cost:
-            c[nr + cost_rows(q, nr).argmax(0), cols] = nu * inv_lam
-        return c
-
-    def grad_fn(a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        q, grad_q = critics.q_and_action_grad(proj, a, coef_of)
-        diff = a - mean
-        energy = -inv_lam * reward_rows(q, nr).min(0).values
-        if critics.n_cost:
-            energy = energy + nu * inv_lam * cost_rows(q, nr).max(0).values
-        energy = energy + logp_weight * 0.5 * (diff * diff * inv_var).sum(-1) + logp_const
-        return energy, grad_q + logp_weight * diff * inv_var   # ∇(−w log π) = w(a−μ)/σ²
-
-    return grad_fn
-
-
 @dataclass(frozen=True, eq=False)
 class ChainSettings:
     """Algorithm 1's settings, checked once when made (``LACTorchRLModule`` makes one from its
@@ -175,7 +141,7 @@ class ChainSettings:
     high: torch.Tensor | None = None
     grad_clip: float | None = None  # clip of ∇_a E at every step (None: off), see clip_grad
     grad_clip_mode: str = "batch"
-    fused: bool = False  # each step's energy gradient through torch.compile (fused_energy)
+    fused: bool = False  # each step's energy gradient through torch.compile (energy.make_grad_fn)
     dtype: str = "float32"  # the critics' matmul inputs: "float32" | "bfloat16"
 
     def __post_init__(self):
@@ -218,8 +184,8 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
             grad_fn = make_grad_fn(critics, proj, mean, log_std, temperature=s.temperature, nu=nu,
                                    logp_weight=s.logp_weight, compiled=s.fused, dtype=s.dtype)
         else:
-            grad_fn = lac_energy_and_grad(critics, proj, mean, log_std, temperature=s.temperature,
-                                          nu=nu, logp_weight=s.logp_weight)
+            grad_fn = eager_grad_fn(critics, proj, mean, log_std, temperature=s.temperature,
+                                    nu=nu, logp_weight=s.logp_weight)
         return run_chain(grad_fn, a0, steps=s.steps, step_size=s.step_size,
                          noise=None if noise is None else noise[1:], generator=generator,
                          low=s.low, high=s.high, grad_clip=s.grad_clip, grad_clip_mode=s.grad_clip_mode)

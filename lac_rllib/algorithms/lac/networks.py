@@ -77,7 +77,7 @@ def gaussian_kl(mean_p: torch.Tensor, log_std_p: torch.Tensor,
 def reward_rows(q: torch.Tensor, n_reward: int) -> torch.Tensor:
     """Q_R1..Q_Rn: the reward critics' rows of a critic-ensemble output q (E, ...), a view.
 
-    A plain function of a tensor and an int, so torch.compile traces it (lac_rllib.algorithms.lac.fused_energy).
+    A plain function of a tensor and an int, so torch.compile traces it (lac_rllib.algorithms.lac.energy).
     """
     return q[:n_reward]
 

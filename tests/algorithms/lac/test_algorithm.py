@@ -278,3 +278,57 @@ def test_a_restored_run_draws_fresh_randomness(ray_session, tmp_path):
     assert not np.array_equal(rewards_a[0], first_rewards[0]), "the restored run replayed iteration 1"
     assert ret_a == ret_b
     assert all(np.array_equal(a, b) for a, b in zip(rewards_a, rewards_b))
+
+
+# Recorded before the code moved into lac_rllib/algorithms/ and lac_rllib/constrained/ (issue 20),
+# from the code of commit ee98e26, on an AMD EPYC with AVX512 (the same numbers bit for bit then
+# and after the move). The tolerances allow for another CPU's float rounding, not for a change of
+# behaviour: a different ν rule, bound, lr schedule or loss moves these by far more.
+RECORDED_ROWS = [  # (episode_return, episode_cost, nu, nu_max) per iteration
+    (-10.141044778219666, 3.2, 0.0860000029206276, 2.0),
+    (-9.948138485451167, 2.8, 0.10999999940395355, 16.519018393434344),
+    (-10.11891845735155, 0.2, 0.0559999980032444, 15.594225858160325),
+]
+RECORDED_WEIGHTS = (3690.5293577343737, -2.4057239257444962)  # Σ|w|, Σw over the module's state
+
+
+def test_a_seeded_run_repeats_the_recorded_numbers(ray_session):
+    import numpy as np
+
+    from lac_rllib.algorithms.lac.config import LACConfig
+
+    config = (LACConfig().task("lac/PointHazard-v0")
+              .training(total_env_steps=3000, random_iterations=1, env_steps_per_iteration=1000, nu_init=0.05)
+              .debugging(seed=3))
+    algo = config.build_algo()
+    try:
+        rows = []
+        for _ in range(3):
+            r = algo.train()
+            rows.append((r[EPISODE_RETURN], r[EPISODE_COST], r[NU], r["learners"][DEFAULT_MODULE_ID][NU_MAX]))
+        state = algo.learner_group.get_state(components="learner/rl_module")["learner"]["rl_module"][DEFAULT_MODULE_ID]
+    finally:
+        algo.stop()
+    for got, want in zip(rows, RECORDED_ROWS):
+        assert got == pytest.approx(want, rel=1e-4, abs=1e-6)
+    values = [np.asarray(v, dtype=np.float64) for v in state.values()]
+    assert (sum(np.abs(v).sum() for v in values), sum(v.sum() for v in values)) == \
+        pytest.approx(RECORDED_WEIGHTS, rel=1e-4)
+
+
+def test_a_nan_gradient_is_zeroed_as_torch_learner_does(ray_session):
+    """LAC's apply_gradients goes through TorchLearner's, whose guard turns NaN/inf gradients into
+    zeros (torch_skip_nan_gradients=False) instead of writing NaN into the weights."""
+    algo = tiny_config(env_steps_per_iteration=200, random_iterations=1).build_algo()
+    try:
+        algo.train()
+        learner = algo.learner_group._learner
+        learner._iteration = 1  # the actor trains too
+        module = learner.module[DEFAULT_MODULE_ID]
+        params = [*learner.get_parameters(module.critics), *learner.get_parameters(module.actor)]
+        grads = {learner.get_param_ref(p): torch.full_like(p, float("nan")) for p in params}
+        learner.apply_gradients(grads)
+        assert all(torch.isfinite(p).all() for p in params)
+        assert all(torch.isfinite(t).all() for t in module.target_critics.parameters())
+    finally:
+        algo.stop()

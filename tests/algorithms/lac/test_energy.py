@@ -1,4 +1,4 @@
-"""The fused chain step (lac_rllib.algorithms.lac.fused_energy): the compiled step equals the eager chain, the
+"""The LAC energy (lac_rllib.algorithms.lac.energy): the compiled step equals the eager chain, the
 bfloat16 matmuls move end points by far less than the chain's own noise, and a failed compile
 falls back to the exact eager path."""
 
@@ -9,7 +9,7 @@ import pytest
 import torch
 from conftest import chain
 
-from lac_rllib.algorithms.lac import fused_energy
+from lac_rllib.algorithms.lac import energy as energy_module
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
 ETA = 1e-4
@@ -35,7 +35,7 @@ def _case(obs_dim=9, act_dim=3, batch=64, hidden=(64, 64, 64), activation="mish"
 def test_pure_function_equals_the_hand_written_backward(activation, clip):
     critics, obs, mean, log_std, kw = _case(activation=activation)
     ref = chain(critics, obs, mean, log_std, grad_clip=clip, **kw)
-    grad_fn = fused_energy.make_grad_fn(critics, critics.project_state(obs), mean, log_std, temperature=1e-3,
+    grad_fn = energy_module.make_grad_fn(critics, critics.project_state(obs), mean, log_std, temperature=1e-3,
                                         nu=0.7, logp_weight=1.0, compiled=False)
     energy, grad = grad_fn(ref.action)
     with torch.enable_grad():  # autograd through the full critics as the judge
@@ -53,7 +53,7 @@ def test_compiled_chain_equals_eager_chain():
     critics, obs, mean, log_std, kw = _case()
     eager = chain(critics, obs, mean, log_std, grad_clip=1000.0, **kw)
     fused = chain(critics, obs, mean, log_std, grad_clip=1000.0, fused=True, **kw)
-    assert not fused_energy._compile_failed, "torch.compile fell back to eager: nothing was compared"
+    assert not energy_module._compile_failed, "torch.compile fell back to eager: nothing was compared"
     torch.testing.assert_close(fused.action, eager.action, rtol=0, atol=1e-5)
     torch.testing.assert_close(fused.energy_end, eager.energy_end, rtol=1e-5, atol=1e-2)
     torch.testing.assert_close(fused.grad_norm, eager.grad_norm, rtol=1e-5, atol=0)
@@ -86,12 +86,12 @@ def test_a_failed_compile_falls_back_to_the_eager_path(monkeypatch, caplog):
     def broken(*args, **kwargs):
         raise RuntimeError("no C++ compiler")
 
-    monkeypatch.setattr(fused_energy, "_compiled", broken)
-    monkeypatch.setattr(fused_energy, "_compile_failed", False)
-    with caplog.at_level(logging.WARNING, logger=fused_energy.__name__):
+    monkeypatch.setattr(energy_module, "_compiled", broken)
+    monkeypatch.setattr(energy_module, "_compile_failed", False)
+    with caplog.at_level(logging.WARNING, logger=energy_module.__name__):
         fused = chain(critics, obs, mean, log_std, fused=True, **kw)
     eager = chain(critics, obs, mean, log_std, **kw)
-    assert fused_energy._compile_failed
+    assert energy_module._compile_failed
     assert "no C++ compiler" in caplog.text
     torch.testing.assert_close(fused.action, eager.action, rtol=0, atol=1e-5)
 

@@ -1,0 +1,50 @@
+"""The package's face: its version, its public names, its console scripts, and a Langevin chain
+(and Lagrange multiplier) that import no RLlib."""
+
+import importlib.metadata
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import lac_rllib
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_version_is_the_installed_one():
+    assert lac_rllib.__version__ == importlib.metadata.version("lac-rllib")
+
+
+@pytest.mark.parametrize("name", [n for n in lac_rllib.__all__ if n != "__version__"])
+def test_public_names_resolve(name):
+    assert getattr(lac_rllib, name).__name__ == name
+
+
+def test_unknown_name_is_an_attribute_error():
+    with pytest.raises(AttributeError, match="no attribute 'Nope'"):
+        _ = lac_rllib.Nope
+
+
+@pytest.mark.parametrize("module", ["lac_rllib.algorithms.lac.langevin", "lac_rllib.constrained.lagrange",
+                                    "lac_rllib.tasks"])
+def test_plain_modules_import_no_rllib(module):
+    code = f"import sys, {module}; print(sorted(m for m in sys.modules if m == 'ray' or m.startswith('ray.')))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", f"{module} pulls in {out.strip()[:200]}"
+
+
+@pytest.mark.parametrize("script", ["lac-train", "lac-sweep", "lac-eval"])
+def test_console_scripts_answer_help(script):
+    exe = shutil.which(script, path=str(Path(sys.executable).parent))
+    assert exe, f"{script} is not installed beside {sys.executable}"
+    out = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and "usage:" in out.stdout, out.stderr[-500:]
+
+
+def test_no_sys_path_edits_in_package_code():
+    offenders = [str(p.relative_to(ROOT)) for d in ("lac_rllib", "sweeps") for p in (ROOT / d).rglob("*.py")
+                 if "sys.path.insert" in p.read_text(encoding="utf-8")]
+    assert offenders == []
