@@ -69,9 +69,9 @@ def config_markdown() -> str:
     touched = [n for n in defaults if any(n in p for p in PRESETS.values())]
     out += [
         "", "## Presets", "",
-        "`LACConfig().task(id)` applies the task's preset (`PRESETS` in `lac_rllib/algorithms/lac/config.py`), then the",
-        "task's own overrides (next table); explicit `training(...)` values win over both. An empty cell",
-        "keeps the default.",
+        "`LACConfig().task(id)` applies the task's preset (`PRESETS` in `lac_rllib/algorithms/lac/config.py`),",
+        "then the task's own overrides (next table); explicit `training(...)` values win over both. An empty",
+        "cell keeps the default.",
         "",
         "| field | default | " + " | ".join(f"`{p}`" for p in PRESETS) + " |",
         "|---|---|" + "---|" * len(PRESETS),

@@ -65,7 +65,8 @@ def test_config_md_is_generated_from_the_code():
     if text != expected:
         diff = "\n".join(list(difflib.unified_diff(text.splitlines(), expected.splitlines(), "docs/config.md",
                                                    "config_markdown()", lineterm=""))[:30])
-        pytest.fail(f"docs/config.md is out of date with lac_rllib/algorithms/lac/config.py; regenerate it with: {REGENERATE}\n{diff}")
+        pytest.fail(f"docs/config.md is out of date with lac_rllib/algorithms/lac/config.py; regenerate it with: "
+                    f"{REGENERATE}\n{diff}")
 
 
 @pytest.mark.parametrize("field", dataclasses.fields(LACParams), ids=lambda f: f.name)
