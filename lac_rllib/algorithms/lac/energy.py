@@ -32,6 +32,7 @@ import math
 
 import torch
 
+from lac_rllib.algorithms.lac import networks
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, cost_rows, reward_rows
 
 DTYPES = ("float32", "bfloat16")
@@ -88,7 +89,8 @@ def eager_grad_fn(critics: CriticEnsemble, proj: torch.Tensor, mean: torch.Tenso
 
 # ----- Fused: one pure function for torch.compile -----
 def _act_and_grad(name: str, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Activation and its derivative at z, out-of-place (Inductor fuses them into one loop)."""
+    """Activation and its derivative at z, out-of-place (Inductor fuses them into one loop); Mish
+    written here because networks' is in place."""
     if name == "mish":
         # mish(z) = z·t, t = tanh(softplus(z)) = n/(n+2) with n = e(e+2), e = exp(z);
         # mish'(z) = t + z·σ(z)(1 − t²) = t + 4·z·e(e+1)/(n+2)². z is clamped at 20 for exp,
@@ -98,12 +100,7 @@ def _act_and_grad(name: str, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tenso
         r = 1.0 / (n + 2.0)
         t = n * r
         return z * t, t + 4.0 * z * e * (e + 1.0) * r * r
-    if name == "tanh":
-        t = torch.tanh(z)
-        return t, 1.0 - t * t
-    if name == "relu":
-        return torch.relu(z), (z > 0).to(z.dtype)
-    raise ValueError(f"activation={name!r}; accepted: mish, tanh, relu")
+    return networks.act_and_grad(name, z)  # tanh and relu are out-of-place there already
 
 
 def _mm(x: torch.Tensor, w: torch.Tensor) -> torch.Tensor:

@@ -88,7 +88,7 @@ def cost_rows(q: torch.Tensor, n_reward: int) -> torch.Tensor:
     return q[n_reward:]
 
 
-def _act_and_grad(name: str, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def act_and_grad(name: str, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Activation value and its derivative at the pre-activation z (for the manual backward)."""
     if name == "mish":
         # mish(z) = z·t, t = tanh(softplus(z)); mish'(z) = t + z·σ(z)·(1 − t²). With e = e^z and
@@ -177,7 +177,7 @@ class CriticEnsemble(nn.Module):
         weights, biases = list(self.weights), list(self.biases)  # (slicing a ParameterList is slow)
         derivs = []
         for w, b in zip(weights[1:], biases[1:]):
-            h, dh = _act_and_grad(self.activation, z)
+            h, dh = act_and_grad(self.activation, z)
             derivs.append(dh)
             z = torch.baddbmm(b, h, w)
         q = z.squeeze(-1)
