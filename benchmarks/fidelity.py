@@ -35,7 +35,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))  # run from a checkout
 
 # Published figures: reward / cost (mean ± std), with the budget they were reached at.
 PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)

@@ -40,8 +40,6 @@ import time
 import uuid
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
-
 PHASES = ("env", "sampling machinery", "chain", "update", "other", "total")
 BASELINE = {"num_envs_per_env_runner": 1, "langevin_fused": False, "langevin_dtype": "float32"}
 BASELINE_ENV_CONFIG = {"light_resets": False}  # stock Safety-Gymnasium resets

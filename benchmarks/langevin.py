@@ -23,16 +23,12 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
-
-from lac_rllib.algorithms.lac.langevin import langevin_chain, naive_langevin_chain  # noqa: E402
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows  # noqa: E402
+from lac_rllib.algorithms.lac.langevin import langevin_chain, naive_langevin_chain
+from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows
 
 TASK_DIMS = {"PointGoal1": (60, 2), "Humanoid": (376, 17)}
 CHAIN = dict(steps=30, step_size=1e-4, temperature=1e-3, nu=0.5)

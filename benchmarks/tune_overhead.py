@@ -12,12 +12,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def main() -> None:
@@ -33,7 +30,6 @@ def main() -> None:
     from lac_rllib.algorithms.lac.config import build_config
     from lac_rllib.train import train
     from sweeps import run as cli
-    from sweeps import spaces
     from sweeps.sweep import run_sweep
 
     tmp = Path(tempfile.mkdtemp(prefix="tune_overhead_"))
@@ -43,14 +39,12 @@ def main() -> None:
     plan = cli.make_plan(args)
     plan = dataclasses.replace(plan, trials=plan.trials[: a.trials], n_trials=min(a.trials, plan.n_trials),
                                concurrency=1)
-    budget = spaces.BUDGETS[a.budget]
     ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False, logging_level="ERROR")
 
     start = time.perf_counter()
-    for t in plan.trials:
-        steps, overrides = budget.for_task(t.task)
-        config = build_config(t.task, t.seed, {**overrides, **t.overrides}, timesteps=steps)
-        train(config, steps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
+    for t in plan.trials:  # with the LAC fields the plan resolved for it, as its sweep trial runs
+        config = build_config(t.task, t.seed, t.lac_params, timesteps=plan.timesteps)
+        train(config, plan.timesteps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
     direct = time.perf_counter() - start
 
     start = time.perf_counter()

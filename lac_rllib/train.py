@@ -26,6 +26,16 @@ from lac_rllib.algorithms.lac.config import (
     field_docs,
     parse_sets,
 )
+from lac_rllib.constrained.metrics import (
+    COST_LIMIT,
+    ENV_STEPS,
+    EPISODE_COST,
+    EPISODE_RETURN,
+    FEASIBLE,
+    ITERATION,
+    NU,
+    iteration_row,
+)
 from lac_rllib.tasks import known_tasks
 
 
@@ -94,12 +104,9 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print, checkpoi
 
     Checkpoints (replay buffer included, ``store_replay_buffer``) every ``checkpoint_every``
     iterations (0: only at the end). ``resume`` restores the latest one and continues: iterations
-    after it are dropped from ``progress.jsonl`` and trained again.
+    after it are dropped from ``progress.jsonl`` and trained again. A run whose latest checkpoint
+    already reached ``timesteps`` is finished: nothing is trained, and its summary is returned.
     """
-    from ray.rllib.core import DEFAULT_MODULE_ID
-
-    from lac_rllib.algorithms.lac.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
-    from lac_rllib.algorithms.lac.learner import REPORTED_KEYS
     from lac_rllib.tasks.versions import runtime_versions
 
     os.makedirs(output, exist_ok=True)
@@ -107,37 +114,41 @@ def train(config: LACConfig, timesteps: int, output: str, *, log=print, checkpoi
     with open(os.path.join(output, CONFIG), "w") as f:
         json.dump(run_config(config), f, indent=2)
     algo = config.build_algo()
-    start, result, rows = time.time(), {}, []
-    if resume:
-        algo.restore_from_path(resumable_checkpoint(output))
-        with open(os.path.join(output, PROGRESS)) as f:
-            rows = [r for r in map(json.loads, filter(str.strip, f)) if r["iteration"] <= algo.iteration]
-        start -= rows[-1]["time_s"] if rows else 0.0
-        result = {ENV_STEPS: rows[-1][ENV_STEPS]} if rows else {}
-        log(f"resumed at iteration {algo.iteration} from {resumable_checkpoint(output)}")
+    start, rows = time.time(), []
     try:
-        with open(os.path.join(output, PROGRESS), "w") as progress:
-            progress.writelines(json.dumps(r) + "\n" for r in rows)
-            progress.flush()
-            while not result or result[ENV_STEPS] < timesteps:
-                result = algo.train()
-                row = {k: float(result[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
-                learner = result.get("learners", {}).get(DEFAULT_MODULE_ID, {})
-                row.update({k: float(learner[k]) for k in REPORTED_KEYS if k in learner})
-                row["iteration"], row["time_s"] = int(result["training_iteration"]), time.time() - start
-                progress.write(json.dumps(row) + "\n")
-                progress.flush()  # a run killed mid-way keeps every finished iteration
-                log(f"iter {row['iteration']:4d}  steps {int(row[ENV_STEPS]):8d}  return {_fmt(row[EPISODE_RETURN]):>8}"
-                    f"  cost {_fmt(row[EPISODE_COST]):>7} / {_fmt(row[COST_LIMIT])}  nu {_fmt(row[NU]):>7}"
-                    f"  {row['time_s']:7.1f}s", flush=True)
-                if checkpoint_every and row["iteration"] % checkpoint_every == 0 and row[ENV_STEPS] < timesteps:
-                    _save(algo, output)
-        checkpoint = _save(algo, output)
+        if resume:
+            checkpoint = resumable_checkpoint(output)
+            algo.restore_from_path(checkpoint)
+            with open(os.path.join(output, PROGRESS)) as f:
+                rows = [r for r in map(json.loads, filter(str.strip, f)) if r[ITERATION] <= algo.iteration]
+            start -= rows[-1]["time_s"] if rows else 0.0
+            log(f"resumed at iteration {algo.iteration} from {checkpoint}")
+        row = rows[-1] if rows else None
+        if row is not None and row[ENV_STEPS] >= timesteps:
+            # The checkpoint is the one written after the last iteration: the run is complete.
+            log(f"the run in {output} is finished: {int(row[ENV_STEPS])} of {timesteps} env steps at iteration "
+                f"{row[ITERATION]}; nothing to train")
+            wall_time_s = row["time_s"]
+        else:
+            with open(os.path.join(output, PROGRESS), "w") as progress:
+                progress.writelines(json.dumps(r) + "\n" for r in rows)
+                progress.flush()
+                while row is None or row[ENV_STEPS] < timesteps:
+                    row = {**iteration_row(algo.train()), "time_s": time.time() - start}
+                    progress.write(json.dumps(row) + "\n")
+                    progress.flush()  # a run killed mid-way keeps every finished iteration
+                    log(f"iter {row[ITERATION]:4d}  steps {int(row[ENV_STEPS]):8d}  return "
+                        f"{_fmt(row[EPISODE_RETURN]):>8}  cost {_fmt(row[EPISODE_COST]):>7} / {_fmt(row[COST_LIMIT])}"
+                        f"  nu {_fmt(row[NU]):>7}  {row['time_s']:7.1f}s", flush=True)
+                    if checkpoint_every and row[ITERATION] % checkpoint_every == 0 and row[ENV_STEPS] < timesteps:
+                        _save(algo, output)
+            checkpoint = _save(algo, output)
+            wall_time_s = time.time() - start
     finally:
         algo.stop()
     return {**{k: row[k] for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, NU)},
-            "feasible": bool(row[FEASIBLE]), "env_steps": int(row[ENV_STEPS]),
-            "iterations": row["iteration"], "wall_time_s": round(time.time() - start, 2),
+            FEASIBLE: bool(row[FEASIBLE]), ENV_STEPS: int(row[ENV_STEPS]),
+            "iterations": row[ITERATION], "wall_time_s": round(wall_time_s, 2),
             "checkpoint": checkpoint, "task": config.task_id, "seed": config.seed,
             "versions": runtime_versions()}
 
@@ -152,7 +163,7 @@ def start_ray(num_cpus: int, attempts: int = 3) -> None:
             ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False,
                      configure_logging=True, logging_level="ERROR")
             return
-        except Exception as e:  # noqa: BLE001  (Ray raises a bare Exception for this)
+        except Exception as e:  # Ray raises a bare Exception for this
             if "timed out during startup" not in str(e) or attempt == attempts:
                 raise
             print(f"lac-train: Ray's node did not start in time (attempt {attempt}/{attempts}); retrying",

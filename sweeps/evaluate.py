@@ -39,9 +39,6 @@ import math
 import os
 import sys
 import tempfile
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `python sweeps/evaluate.py` from a checkout
 
 PROG = "evaluate"
 EVAL_PREFIX = "eval"
@@ -134,6 +131,7 @@ def get_run(client, run_id: str):
 
 def best_trial(client, sweep_run_id: str):
     """The sweep's child run with feasible = 1 and the highest episode_return."""
+    from lac_rllib.constrained.metrics import EPISODE_RETURN, FEASIBLE
     from sweeps.tracking import PARENT_TAG, SWEEP_TAG
 
     parent = get_run(client, sweep_run_id)
@@ -146,10 +144,10 @@ def best_trial(client, sweep_run_id: str):
         raise UsageError(f"sweep {sweep_run_id} has no trial runs")
 
     def score(run) -> float:
-        value = run.data.metrics.get("episode_return")
+        value = run.data.metrics.get(EPISODE_RETURN)
         return -math.inf if value is None or math.isnan(value) else value
 
-    feasible = [r for r in children if r.data.metrics.get("feasible") == 1.0]
+    feasible = [r for r in children if r.data.metrics.get(FEASIBLE) == 1.0]
     if not feasible:
         raise UsageError(f"sweep {sweep_run_id} has no feasible trial (none of its {len(children)} "
                          "trials has metric feasible = 1)")
@@ -170,7 +168,7 @@ def download_checkpoint(client, run, dst: str) -> str:
     try:
         path = mlflow.artifacts.download_artifacts(
             run_id=run_id, artifact_path=artifact_path, dst_path=dst, tracking_uri=client.tracking_uri)
-    except Exception as e:  # noqa: BLE001 (MlflowException, OSError, store-specific errors)
+    except Exception as e:  # MlflowException, OSError, store-specific errors
         raise UsageError(f"MLflow run {run_id} has no checkpoint: artifact {artifact_path!r} cannot be "
                          f"downloaded ({_one_line(e)})") from None
     try:  # before anything is unpickled
@@ -189,15 +187,17 @@ def resolve_checkpoint(args: argparse.Namespace, workdir: str) -> Resolved:
     if args.run_id:
         run, source = get_run(client, args.run_id), f"MLflow run {args.run_id}"
     else:
+        from lac_rllib.constrained.metrics import EPISODE_RETURN
+
         run = best_trial(client, args.best_of)
         source = (f"MLflow run {run.info.run_id} (best feasible trial of sweep {args.best_of}, "
-                  f"episode_return {run.data.metrics.get('episode_return')})")
-    from sweeps.tracking import CHECKPOINT_TAG
+                  f"{EPISODE_RETURN} {run.data.metrics.get(EPISODE_RETURN)})")
+    from sweeps.tracking import CHECKPOINT_TAG, P_TASK
 
     path = download_checkpoint(client, run, workdir)
     return Resolved(checkpoint=path, run_id=run.info.run_id, source=source,
                     uri=f"runs:/{run.info.run_id}/{run.data.tags[CHECKPOINT_TAG]}",
-                    task_param=run.data.params.get("task"))
+                    task_param=run.data.params.get(P_TASK))
 
 
 def log_eval_to_run(client, run_id: str, result: dict) -> list[str]:

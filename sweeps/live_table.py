@@ -14,9 +14,11 @@ import sys
 import time
 
 from ray.tune import ProgressReporter
+from ray.tune.result import TIME_TOTAL_S, TRAINING_ITERATION
+
+from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 
 COLUMNS = ("trial", "status", "iter", "env steps", "return", "cost", "feasible", "ν")
-_METRICS = ("training_iteration", "env_steps", "episode_return", "episode_cost", "feasible", "nu")
 _DONE = ("TERMINATED", "ERROR")
 
 
@@ -36,11 +38,11 @@ def format_table(rows: list[list[str]]) -> str:
 
 def trial_row(trial) -> list[str]:
     r = trial.last_result or {}
-    feasible = r.get("feasible")
-    return [str(trial), trial.status, _cell(r.get("training_iteration"), "d"), _cell(r.get("env_steps"), ",.0f"),
-            _cell(r.get("episode_return"), ".2f"), _cell(r.get("episode_cost"), ".1f"),
+    feasible = r.get(FEASIBLE)
+    return [str(trial), trial.status, _cell(r.get(TRAINING_ITERATION), "d"), _cell(r.get(ENV_STEPS), ",.0f"),
+            _cell(r.get(EPISODE_RETURN), ".2f"), _cell(r.get(EPISODE_COST), ".1f"),
             "–" if feasible is None or feasible != feasible else ("yes" if feasible else "no"),
-            _cell(r.get("nu"), ".3f")]
+            _cell(r.get(NU), ".3f")]
 
 
 def progress_line(trials, total: int, concurrency: int, now: float | None = None) -> str:
@@ -48,8 +50,8 @@ def progress_line(trials, total: int, concurrency: int, now: float | None = None
     done = [t for t in trials if t.status in _DONE]
     failed = sum(t.status == "ERROR" for t in trials)
     running = [t for t in trials if t.status == "RUNNING"]
-    durations = [t.last_result["time_total_s"] for t in done
-                 if t.status == "TERMINATED" and (t.last_result or {}).get("time_total_s")]
+    durations = [t.last_result[TIME_TOTAL_S] for t in done
+                 if t.status == "TERMINATED" and (t.last_result or {}).get(TIME_TOTAL_S)]
     line = f"progress: {len(done)}/{total} trials done" + (f" ({failed} failed)" if failed else "")
     line += f" · {len(running)} running"
     if not durations:
@@ -57,7 +59,7 @@ def progress_line(trials, total: int, concurrency: int, now: float | None = None
     mean = sum(durations) / len(durations)
     # Time still owed: whole trials not started, and the rest of the running ones (at least 0).
     left = (total - len(done) - len(running)) * mean
-    left += sum(max(mean - (t.last_result or {}).get("time_total_s", 0.0), 0.0) for t in running)
+    left += sum(max(mean - (t.last_result or {}).get(TIME_TOTAL_S, 0.0), 0.0) for t in running)
     eta = left / max(1, concurrency)
     return line + f" · ETA ~{eta / 60:.0f} min (mean {mean / 60:.1f} min per finished trial, n={len(durations)})"
 

@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE  # noqa: E402
 from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 
 KEYS = ["group", "param", "value", "task", "config"]
@@ -74,7 +75,7 @@ def _prepared(trials: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
     df["config"] = df["config"].fillna("").astype(str) if "config" in df else ""
     df["default"] = df["default"].fillna(False).astype(bool) if "default" in df else False
     failed = df["status"].astype(str).eq("ERROR")
-    for col in ("episode_return", "episode_cost"):
+    for col in (EPISODE_RETURN, EPISODE_COST):
         failed |= pd.to_numeric(df[col], errors="coerce").isna()
     return df, failed
 
@@ -87,20 +88,20 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
     scored = df[~(failed | stopped)]
     for key, g in df.groupby(KEYS, dropna=False, sort=False):
         ok = g[~(failed | stopped).loc[g.index]]
-        ret, cost = (pd.to_numeric(ok[c], errors="coerce") for c in ("episode_return", "episode_cost"))
-        limit = pd.to_numeric(g["cost_limit"], errors="coerce").median()
+        ret, cost = (pd.to_numeric(ok[c], errors="coerce") for c in (EPISODE_RETURN, EPISODE_COST))
+        limit = pd.to_numeric(g[COST_LIMIT], errors="coerce").median()
         base = scored[scored["default"] & (scored["task"] == g["task"].iloc[0])]
         rows.append(dict(
             zip(KEYS, key), n_seeds=len(ok), n_failed=int(failed.loc[g.index].sum()),
             n_stopped=int(stopped.loc[g.index].sum()),
             return_mean=ret.mean(), return_std=ret.std(ddof=1),
             cost_mean=cost.mean(), cost_std=cost.std(ddof=1), cost_limit=limit,
-            feasible_fraction=pd.to_numeric(ok["feasible"], errors="coerce").mean(),
+            feasible_fraction=pd.to_numeric(ok[FEASIBLE], errors="coerce").mean(),
             mean_feasible=bool(cost.mean() <= limit),  # False when either side is NaN
             objective_mean=pd.to_numeric(ok["objective"], errors="coerce").mean(),
             is_default=bool(g["default"].any()),
             **seed_statistics(ret, cost, *(pd.to_numeric(base[c], errors="coerce") for c in
-                                           ("episode_return", "episode_cost")) if len(base) else (None, None))))
+                                           (EPISODE_RETURN, EPISODE_COST)) if len(base) else (None, None))))
     rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"]))
     return pd.DataFrame(rows, columns=KEYS + STATS)
 
@@ -257,13 +258,13 @@ def cost_box_plots(trials: pd.DataFrame, path) -> str | None:
     rng = np.random.default_rng(0)  # jitter of the seed dots only
     for ax, (label, param, sub) in zip(axes.ravel(), panels):
         vals = _values(sub)
-        data = [pd.to_numeric(rows["episode_cost"]).to_numpy(float) for _, rows in vals]
+        data = [pd.to_numeric(rows[EPISODE_COST]).to_numpy(float) for _, rows in vals]
         pos = np.arange(1, len(vals) + 1)
         ax.boxplot(data, positions=pos, widths=0.5)
         for p, d in zip(pos, data):
             ax.plot(p + rng.uniform(-0.12, 0.12, len(d)), d, "o", ms=4, alpha=0.6, color="tab:blue")
         ax.set_xticks(pos, [lab for lab, _ in vals])
-        limit = _limit(sub["cost_limit"])
+        limit = _limit(sub[COST_LIMIT])
         if not math.isnan(limit):
             ax.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
             ax.legend(loc="best", fontsize=8)
@@ -306,11 +307,11 @@ def aggregate_plots(summary: pd.DataFrame, path) -> str | None:
 
 def _xy(frame: pd.DataFrame, col: str) -> tuple[np.ndarray, np.ndarray]:
     """(env_steps, col) of a curve, numeric, NaN-free, sorted by env_steps."""
-    if frame is None or "env_steps" not in frame or col not in frame:
+    if frame is None or ENV_STEPS not in frame or col not in frame:
         return np.empty(0), np.empty(0)
-    d = frame[["env_steps", col]].apply(pd.to_numeric, errors="coerce").dropna()
-    d = d.sort_values("env_steps")
-    return d["env_steps"].to_numpy(float), d[col].to_numpy(float)
+    d = frame[[ENV_STEPS, col]].apply(pd.to_numeric, errors="coerce").dropna()
+    d = d.sort_values(ENV_STEPS)
+    return d[ENV_STEPS].to_numpy(float), d[col].to_numpy(float)
 
 
 def _mean_curve(frames: list[pd.DataFrame], col: str, n: int = 200):
@@ -340,7 +341,7 @@ def learning_curves(trials: pd.DataFrame, curves: dict, path) -> str | None:
     for label, param, sub in _panels(trials, swept_only=False):
         lines = [(lab, [curves[t] for t in r["trial_id"] if t in curves]) for lab, r in _values(sub)]
         lines = [(lab, fr) for lab, fr in lines
-                 if any(_xy(f, c)[0].size for f in fr for c in ("episode_return", "episode_cost"))]
+                 if any(_xy(f, c)[0].size for f in fr for c in (EPISODE_RETURN, EPISODE_COST))]
         if lines:
             rows.append((label, param, sub, lines))
     if not rows:
@@ -349,15 +350,15 @@ def learning_curves(trials: pd.DataFrame, curves: dict, path) -> str | None:
     for (label, param, sub, lines), (ax_r, ax_c) in zip(rows, axes):
         for i, (lab, frames) in enumerate(lines):
             name = f"{param}={lab} (n={len(frames)})" if param else f"mean of {len(frames)} seeds"
-            for ax, col in ((ax_r, "episode_return"), (ax_c, "episode_cost")):
+            for ax, col in ((ax_r, EPISODE_RETURN), (ax_c, EPISODE_COST)):
                 m = _mean_curve(frames, col)
                 if m is None:
                     continue
                 x, mean, std = m
                 ax.plot(x, mean, color=f"C{i % 10}", label=name, marker="o" if x.size == 1 else None)
                 ax.fill_between(x, mean - std, mean + std, color=f"C{i % 10}", alpha=0.2)
-        limit = _limit(sub["cost_limit"], *(f["cost_limit"] for _, fr in lines for f in fr
-                                            if isinstance(f, pd.DataFrame) and "cost_limit" in f))
+        limit = _limit(sub[COST_LIMIT], *(f[COST_LIMIT] for _, fr in lines for f in fr
+                                          if isinstance(f, pd.DataFrame) and COST_LIMIT in f))
         if not math.isnan(limit):
             ax_c.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
         ax_r.set(title=f"{label}: episode return", xlabel="env steps", ylabel="episode return")
@@ -370,12 +371,12 @@ def learning_curves(trials: pd.DataFrame, curves: dict, path) -> str | None:
 def trial_curve(curve_df: pd.DataFrame, path, title: str) -> str:
     """A single trial's return and cost vs env steps (cost limit dashed), saved as PNG."""
     fig, (ax_r, ax_c) = plt.subplots(1, 2, figsize=(11, 3.6))
-    for ax, col, name in ((ax_r, "episode_return", "episode return"),
-                          (ax_c, "episode_cost", "episode cost")):
+    for ax, col, name in ((ax_r, EPISODE_RETURN, "episode return"),
+                          (ax_c, EPISODE_COST, "episode cost")):
         x, y = _xy(curve_df, col)
         ax.plot(x, y, marker="o" if x.size == 1 else None, label=name)
         ax.set(title=name, xlabel="env steps", ylabel=name)
-    limit = _limit(curve_df["cost_limit"]) if "cost_limit" in curve_df else math.nan
+    limit = _limit(curve_df[COST_LIMIT]) if COST_LIMIT in curve_df else math.nan
     if not math.isnan(limit):
         ax_c.axhline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
     ax_c.legend(fontsize=8, loc="best")

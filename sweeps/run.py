@@ -16,13 +16,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `python sweeps/run.py` from a checkout
-
-from sweeps import spaces  # noqa: E402
-from sweeps.lock import DriverLock, SweepLocked  # noqa: E402
-from sweeps.plan import Plan  # noqa: E402
-from sweeps.record import SWEEP_FILE, resume_differences  # noqa: E402
-from sweeps.tracking import check_reachable, default_tracking_uri  # noqa: E402
+from sweeps import spaces
+from sweeps.lock import DriverLock, SweepLocked
+from sweeps.plan import Plan
+from sweeps.record import SWEEP_FILE, resume_differences
+from sweeps.tracking import check_reachable, default_tracking_uri
 
 # The plan's estimate, per preset: env steps per second of one trial on 1 CPU without the chain,
 # and chain seconds per env step and per Langevin step (calibration: docs/sweeps.md).
@@ -133,13 +131,18 @@ def make_plan(args) -> Plan:
     check_reachable(uri)
     task = spaces.default_task(args.space, args.task)
     budget = spaces.BUDGETS[args.budget]
-    trials = (spaces.mark_defaults(spaces.grid(args.space, task, args.seeds, args.budget), args.budget, sets)
+    # Every grid trial's LAC fields, resolved once, here (spaces.trial_params: preset < task <
+    # budget < --set < swept value); a search sample is resolved in its trial the same way.
+    trials = (spaces.resolve_trials(spaces.grid(args.space, task, args.seeds, args.budget), args.budget, sets)
               if args.space != "search" else None)
     # search: each Optuna sample is trained with every seed (sweeps/sweep.py, SeedRepeater)
     n_trials = len(trials) if trials is not None else args.num_samples * args.seeds
     concurrency = min(args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial), n_trials)
-    per_trial = ([estimate_trial_s(budget, t.task, t.overrides, args.cpus_per_trial) for t in trials] if trials
-                 else [estimate_trial_s(budget, task, {}, args.cpus_per_trial)] * n_trials)
+    # A search is estimated at the fields it runs before Optuna's samples (the sampled T is not known yet).
+    per_trial = ([estimate_trial_s(t.task, budget.for_task(t.task)[0], t.lac_params, args.cpus_per_trial)
+                  for t in trials] if trials else
+                 [estimate_trial_s(task, budget.for_task(task)[0], spaces.trial_params(task, args.budget, sets),
+                                   args.cpus_per_trial)] * n_trials)
     (timesteps,) = {budget.for_task(t.task)[0] for t in trials} if trials else {budget.for_task(task)[0]}
     name = args.name or f"{args.space}-{(task or 'paper').split('/')[-1]}-{args.budget}"
     optuna_storage = None
@@ -177,23 +180,21 @@ def check_optuna_study(url: str, name: str, resume: bool) -> None:
 
     try:
         studies = {s.study_name for s in optuna.get_all_study_summaries(url)}
-    except Exception as e:  # noqa: BLE001 - any failure means the storage is unusable
+    except Exception as e:  # any failure means the storage is unusable
         raise ValueError(f"--optuna-storage {url}: cannot be opened ({e})") from None
     if name in studies:
         raise ValueError(f"an Optuna study named {name!r} exists in {url}; pass --resume, another --name, or "
                          f"delete it (optuna delete-study --storage {url} --study-name {name})")
 
 
-def estimate_trial_s(budget, task: str, overrides: dict, cpus: int) -> float:
-    """Rough wall seconds of one trial: start-up, then env steps at the preset's measured rate,
-    plus the chain's share, which grows with T (measured on this project's 2-core machine)."""
-    from lac_rllib.algorithms.lac.config import PRESETS, LACParams
+def estimate_trial_s(task: str, steps: int, lac_params: dict, cpus: int) -> float:
+    """Rough wall seconds of one trial of ``steps`` env steps whose LAC fields are ``lac_params``
+    (``spaces.trial_params``): start-up, then env steps at the preset's measured rate, plus the
+    chain's share, which grows with T (measured on this project's 2-core machine)."""
     from lac_rllib.tasks import get_task
 
     preset = get_task(task).preset
-    steps, budget_overrides = budget.for_preset(preset)
-    fields = {**LACParams().__dict__, **PRESETS.get(preset, {}), **budget_overrides, **overrides}
-    chain = CHAIN_S_PER_STEP.get(preset, 0.0) * fields["langevin_steps"] * steps
+    chain = CHAIN_S_PER_STEP.get(preset, 0.0) * lac_params["langevin_steps"] * steps
     return STARTUP_S + (steps / RATE[preset] + chain) / cpus ** 0.5
 
 

@@ -111,6 +111,10 @@ class TrialSpec:
     default: bool = False
     #: A search trial's values as Optuna sampled them (its name); None for grid trials.
     sampled: dict | None = None
+    #: Every LAC field's value in this trial, as :func:`trial_params` resolves it (at plan time for a
+    #: grid trial, in the trial for a search sample); what the estimate, the trainable and the
+    #: default flag read. None until resolved.
+    lac_params: dict | None = None
 
     def config_label(self) -> str:
         """The configuration without its seed (MLflow's ``lac.config`` tag)."""
@@ -153,15 +157,17 @@ def search_label(overrides: dict, seed: int | None) -> str:
 
 
 def trial_spec(config: dict) -> TrialSpec:
-    """A Tune trial's config as the TrialSpec it runs: a grid trial carries its own (``trial``); a
-    search trial is made from what Optuna sampled (``overrides``, on top of the budget's
-    ``budget_overrides``), its seed the index among its sample's seeds (Tune's Repeater numbers
-    the repeats of one Optuna sample 0..N-1)."""
+    """A Tune trial's config as the TrialSpec it runs: a grid trial carries its own, resolved at
+    plan time (``trial``); a search trial is made from what Optuna sampled (``overrides``), resolved
+    here through the same :func:`trial_params` (with the sweep's ``budget`` and ``sets``), its seed
+    the index among its sample's seeds (Tune's Repeater numbers the repeats of one Optuna sample 0..N-1)."""
     if "trial" in config:
         return TrialSpec(**config["trial"])
+    task, budget, sets = config["task"], config["budget"], config.get("sets", {})
     sampled = dict(config["overrides"])
-    return TrialSpec("search", "", None, config["task"], int(config.get(REPEAT_INDEX, 0)),
-                     {**config.get("budget_overrides", {}), **sampled}, sampled=sampled)
+    params = trial_params(task, budget, sets, sampled)
+    return TrialSpec("search", "", None, task, int(config.get(REPEAT_INDEX, 0)), sampled, sampled=sampled,
+                     lac_params=params, default=params == trial_params(task, budget, sets))
 
 
 def validate(space: str, task: str | None, budget: str, seeds: int) -> None:
@@ -204,19 +210,28 @@ def grid(space: str, task: str | None, seeds: int, budget: str = "paper") -> lis
     ]
 
 
-def mark_defaults(trials: list[TrialSpec], budget: str, sets: dict) -> list[TrialSpec]:
-    """Flag the trials whose overrides change nothing: they run LAC's defaults (at this budget,
-    with the user's --set), the baseline every configuration is compared with."""
+def trial_params(task: str, budget: str, sets: dict, overrides: dict | None = None) -> dict[str, Any]:
+    """Every LAC field's value in a trial of ``task`` at ``budget``: the one place the precedence is
+    written. The task's preset < the task's own overrides (``TaskSpec.overrides``, e.g. T = 50 on the
+    Button tasks) < the budget's overrides < the user's ``--set`` < the trial's own ``overrides``
+    (the swept or sampled value). ``build_config`` applies the first two (``LACConfig.task``); the
+    horizon of the learning-rate decay is the budget's env steps unless an override names another."""
     from lac_rllib.algorithms.lac.config import build_config
 
+    steps, budget_overrides = BUDGETS[budget].for_task(task)
+    return build_config(task, 0, {**budget_overrides, **sets, **(overrides or {})}, timesteps=steps).lac_params()
+
+
+def resolve_trials(trials: list[TrialSpec], budget: str, sets: dict) -> list[TrialSpec]:
+    """The grid's trials with their LAC fields resolved (:func:`trial_params`), and the default flag on
+    those whose overrides change nothing: they run LAC's defaults (for their task, at this budget,
+    with the user's --set), the baseline every configuration is compared with."""
     base, out = {}, []
     for t in trials:
-        steps, overrides = BUDGETS[budget].for_task(t.task)
-        common = {**overrides, **sets}
         if t.task not in base:
-            base[t.task] = build_config(t.task, 0, common, timesteps=steps).lac_params()
-        mine = build_config(t.task, 0, {**common, **t.overrides}, timesteps=steps).lac_params()
-        out.append(dataclasses.replace(t, default=mine == base[t.task]))
+            base[t.task] = trial_params(t.task, budget, sets)
+        params = trial_params(t.task, budget, sets, t.overrides)
+        out.append(dataclasses.replace(t, lac_params=params, default=params == base[t.task]))
     return out
 
 

@@ -18,6 +18,7 @@ from ray.tune.schedulers import ASHAScheduler
 from ray.tune.search import Repeater
 from ray.tune.search.optuna import OptunaSearch
 
+from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE
 from sweeps import spaces
 from sweeps.live_table import LiveTable
 from sweeps.plan import Plan
@@ -34,10 +35,11 @@ from sweeps.tracking import (
     STATUS_TAG,
     STOPPED_TAG,
     SweepTracker,
+    learning_curve,
 )
-from sweeps.trainable import LACTrainable, objective
+from sweeps.trainable import CONSTRAINT, OBJECTIVE, LACTrainable, objective
 
-METRIC, MODE = "objective", "max"
+METRIC, MODE = OBJECTIVE, "max"
 
 
 class ConstrainedOptunaSearch(OptunaSearch):
@@ -47,7 +49,7 @@ class ConstrainedOptunaSearch(OptunaSearch):
 
     def on_trial_complete(self, trial_id, result=None, error=False):
         ot_trial = self._ot_trials.get(trial_id)
-        constraint = (result or {}).get("constraint")
+        constraint = (result or {}).get(CONSTRAINT)
         # NaN until an episode completes after a (re)start: Optuna refuses it, and raising here
         # would kill Tune's controller. A trial without a constraint value is one Optuna's TPE
         # ranks below those with one, which is what an unmeasured cost deserves.
@@ -68,7 +70,7 @@ class SeedRepeater(Repeater):
         group = self._trial_id_to_group.get(trial_id)
         if group is None:
             return
-        keys = ("episode_return", "episode_cost", "cost_limit")
+        keys = (EPISODE_RETURN, EPISODE_COST, COST_LIMIT)
         ok = not error and result and all(k in result and math.isfinite(result[k]) for k in keys)
         group.report(trial_id, tuple(float(result[k]) for k in keys) if ok else (math.nan,) * 3)
         if not group.finished_reporting():
@@ -79,7 +81,7 @@ class SeedRepeater(Repeater):
             return
         ret, cost, limit = (sum(col) / len(seeds) for col in zip(*seeds))
         self.searcher.on_trial_complete(group.primary_trial_id, result={
-            METRIC: objective(ret, cost, limit), "constraint": cost - limit, "n_seeds": len(seeds)})
+            METRIC: objective(ret, cost, limit), CONSTRAINT: cost - limit, "n_seeds": len(seeds)})
 
 
 def versions() -> dict:
@@ -97,18 +99,12 @@ def param_space(plan: Plan, args, parent_run_id: str) -> dict:
         "timesteps": plan.timesteps, "cpus": args.cpus_per_trial,
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
-    # The budget's overrides (for the trial's task preset), then the user's --set, then what the trial sweeps.
-    budget = spaces.BUDGETS[plan.budget]
-
-    def base(task: str) -> dict:
-        return {**budget.for_task(task)[1], **plan.sets}
-
-    if plan.trials is None:  # search: Optuna samples the LAC fields
-        return {**common, "task": plan.task, "budget_overrides": base(plan.task),
+    if plan.trials is None:  # search: Optuna samples the LAC fields; the trial resolves them (spaces.trial_spec)
+        return {**common, "task": plan.task, "budget": plan.budget, "sets": plan.sets,
                 "overrides": spaces.tune_search_space()}
+    # Each grid trial carries its LAC fields as the plan resolved them (spaces.resolve_trials).
     # Tune turns dataclasses in a config into tuples: each TrialSpec travels as its dict.
-    return {**common, "trial": tune.grid_search([
-        dataclasses.asdict(dataclasses.replace(t, overrides={**base(t.task), **t.overrides})) for t in plan.trials])}
+    return {**common, "trial": tune.grid_search([dataclasses.asdict(t) for t in plan.trials])}
 
 
 def run_sweep(plan: Plan, args, sweep_dir: Path, commit: str) -> int:
@@ -210,7 +206,7 @@ def _tuner(plan: Plan, args, parent: str, sweep_dir: Path) -> tune.Tuner:
                                                 metric=METRIC, mode=MODE, study_name=plan.name,
                                                 storage=optuna.storages.RDBStorage(plan.optuna_storage))
         search = SeedRepeater(optuna_search, repeat=args.seeds)
-    scheduler = (ASHAScheduler(time_attr="env_steps", metric=METRIC, mode=MODE, max_t=plan.timesteps,
+    scheduler = (ASHAScheduler(time_attr=ENV_STEPS, metric=METRIC, mode=MODE, max_t=plan.timesteps,
                                grace_period=max(1, plan.timesteps // 4)) if args.scheduler == "asha" else None)
     return tune.Tuner(
         trainable, param_space=param_space(plan, args, parent),
@@ -254,15 +250,10 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str)
                      "default": run.data.tags.get(DEFAULT_TAG) == "1",
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
                      if run.info.status == "FINISHED" else "ERROR",
-                     **{k: m.get(k, float("nan")) for k in ("episode_return", "episode_cost", "cost_limit",
-                                                            "feasible", "objective")},
+                     **{k: m.get(k, float("nan")) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE,
+                                                            OBJECTIVE)},
                      **{k: p[k] for k in ("langevin_steps", "langevin_step_size", "temperature", "beta") if k in p}})
-        hist = {k: tracker.client.get_metric_history(run.info.run_id, k) for k in ("episode_return", "episode_cost")}
-        n_points = len(hist["episode_return"])
-        curves[tid] = pd.DataFrame({"env_steps": [x.step for x in hist["episode_return"]],
-                                    "episode_return": [x.value for x in hist["episode_return"]],
-                                    "episode_cost": [x.value for x in hist["episode_cost"]][:n_points],
-                                    "cost_limit": m.get("cost_limit", float("nan"))})
+        curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
     trials = pd.DataFrame(rows)
     with tempfile.TemporaryDirectory() as tmp:
         if len(trials):

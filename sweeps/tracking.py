@@ -64,7 +64,7 @@ def check_reachable(uri: str) -> None:
         try:
             with urllib.request.urlopen(uri.rstrip("/") + "/health", timeout=5) as r:
                 r.read()
-        except Exception as e:  # noqa: BLE001 - any failure means unreachable
+        except Exception as e:  # any failure means unreachable
             raise ValueError(f"--tracking-uri {uri} is unreachable ({e}); "
                              "start `mlflow server` or fix the URI") from None
         return
@@ -102,6 +102,20 @@ def local_artifact_root(uri: str) -> str | None:
     if uri.startswith("sqlite:///"):
         return (Path(uri[len("sqlite:///"):]).parent / "mlruns").resolve().as_uri()
     return None
+
+
+def learning_curve(client, run_id: str, cost_limit: float):
+    """A trial's learning curve from its run's metric histories, one row per logged iteration:
+    env_steps (the step), episode_return, episode_cost and the trial's ``cost_limit`` (a DataFrame;
+    what the trial's learning_curve.png and the sweep's learning_curves.png are drawn from)."""
+    import pandas as pd
+
+    from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN
+
+    returns = client.get_metric_history(run_id, EPISODE_RETURN)
+    costs = client.get_metric_history(run_id, EPISODE_COST)
+    return pd.DataFrame({ENV_STEPS: [m.step for m in returns], EPISODE_RETURN: [m.value for m in returns],
+                         EPISODE_COST: [m.value for m in costs[:len(returns)]], COST_LIMIT: cost_limit})
 
 
 def _params(d: dict) -> list[Param]:
@@ -142,7 +156,7 @@ class RetryingClient:
             while True:
                 try:
                     result = attr(*args, **kwargs)
-                except Exception as e:  # noqa: BLE001 - sorted by _transient
+                except Exception as e:  # sorted by _transient
                     if not _transient(e) or time.monotonic() - start + delay > RETRY_S:
                         raise
                     self._on_retry(e)
@@ -252,7 +266,7 @@ class TrialTracker:
                 for k, v in tags:
                     if self._tags.get(k) == v:
                         del self._tags[k]
-        except Exception as e:  # noqa: BLE001 - the store may be away; keep everything and retry
+        except Exception as e:  # the store may be away; keep everything and retry
             if wait:
                 raise
             self._gap(e)

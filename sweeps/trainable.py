@@ -16,10 +16,18 @@ import traceback
 
 import ray
 from ray import tune
+from ray.tune.result import TIME_TOTAL_S
 
-from lac_rllib.algorithms.lac.algorithm import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 from lac_rllib.algorithms.lac.config import build_config
-from lac_rllib.algorithms.lac.learner import ACTOR_LOSS, CRITIC_LOSS, REPORTED_KEYS
+from lac_rllib.constrained.metrics import (
+    COST_LIMIT,
+    ENV_STEPS,
+    EPISODE_COST,
+    EPISODE_RETURN,
+    ITERATION,
+    iteration_row,
+    non_finite,
+)
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import (
@@ -36,9 +44,13 @@ from sweeps.tracking import (
     P_TASK,
     P_TIMESTEPS,
     TrialTracker,
+    learning_curve,
 )
 
 INFEASIBLE_OFFSET = 1e6
+#: What a trial reports beside its iteration's row: the score Tune, ASHA and Optuna rank by, the
+#: constraint value Optuna's TPE reads (episode cost − limit, ≤ 0 feasible), the trial's wall time.
+OBJECTIVE, CONSTRAINT, WALL_TIME_S = "objective", "constraint", "wall_time_s"
 
 
 def objective(ret: float, cost: float, limit: float) -> float:
@@ -50,14 +62,15 @@ def objective(ret: float, cost: float, limit: float) -> float:
 
 
 class LACTrainable(tune.Trainable):
-    """One trial. config: ``trial`` (a grid trial's TrialSpec) or, for a search, ``task``,
-    ``budget_overrides`` and the sampled ``overrides`` (spaces.trial_spec makes both a TrialSpec);
-    ``timesteps``, ``cpus``, ``tracking`` {uri, experiment, parent_run_id}."""
+    """One trial. config: ``trial`` (a grid trial's TrialSpec, its LAC fields resolved at plan time)
+    or, for a search, ``task``, ``budget``, ``sets`` and the sampled ``overrides`` (spaces.trial_spec
+    makes both a TrialSpec); ``timesteps``, ``cpus``, ``tracking`` {uri, experiment, parent_run_id}."""
 
     def setup(self, config: dict) -> None:
         self.spec = spec = spaces.trial_spec(config)
         self.timesteps = int(config["timesteps"])
-        overrides = {**spec.overrides, "torch_threads": int(config.get("cpus", 1))}
+        # The trial's fields as resolved (spaces.trial_params); the torch threads are its CPUs.
+        overrides = {**spec.lac_params, "torch_threads": int(config.get("cpus", 1))}
         self.lac_config = build_config(spec.task, spec.seed, overrides, timesteps=self.timesteps)
         self.algo = self.lac_config.build_algo()
         tr = config["tracking"]
@@ -69,7 +82,7 @@ class LACTrainable(tune.Trainable):
                 "lac.tune_trial_name": self.trial_name, "lac.group": spec.group,
                 # MLflow's UI groups runs by a tag and averages their curves: one group per configuration.
                 CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, self.lac_config.lac_params()),
-                CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if self._is_default(spec) else "0"}
+                CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if spec.default else "0"}
         self.tracker.open(params, tags)
         prev = self.tracker.previous
         # A trial killed after its run FINISHED but before Tune persisted its last checkpoint is
@@ -81,17 +94,8 @@ class LACTrainable(tune.Trainable):
         if self.logged_up_to and not self.already_finished:
             self.tracker.set_tags({"lac.resumed_after_env_steps": self.logged_up_to})
         self.tracker.set_tags({NODE_TAG: tags[NODE_TAG]})  # the node of the latest (re)start
-        self.tracker.log_text(json.dumps({**params, "cost_limit": self.lac_config.effective_cost_limit},
+        self.tracker.log_text(json.dumps({**params, COST_LIMIT: self.lac_config.effective_cost_limit},
                                          indent=2, default=str), "config.json")
-
-    def _is_default(self, spec: spaces.TrialSpec) -> bool:
-        """A grid trial knows (spaces.mark_defaults); a search sample is LAC's defaults when what
-        Optuna sampled equals what the budget's configuration has anyway."""
-        if spec.sampled is None:
-            return spec.default
-        budget_only = {k: v for k, v in spec.overrides.items() if k not in spec.sampled}
-        base = build_config(spec.task, 0, budget_only, timesteps=self.timesteps)
-        return all(getattr(base, k) == v for k, v in spec.sampled.items())
 
     def step(self) -> dict:
         if self.already_finished:
@@ -101,15 +105,14 @@ class LACTrainable(tune.Trainable):
             if self.iteration + 1 == self.spec.fail_at_iteration:
                 raise RuntimeError(f"injected failure at iteration {self.iteration + 1} (fail_at_iteration)")
             r = self.algo.train()
-            learner = r.get("learners", {}).get("default_policy", {})
-            metrics = {k: float(r[k]) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)}
-            metrics.update({k: float(learner[k]) for k in REPORTED_KEYS if k in learner})
-            bad = [k for k in (CRITIC_LOSS, ACTOR_LOSS, NU) if k in metrics and not math.isfinite(metrics[k])]
+            metrics = iteration_row(r)
+            del metrics[ITERATION]  # Tune counts its own (training_iteration); MLflow's step is env steps
+            bad = non_finite(metrics)
             if bad:
                 raise FloatingPointError(f"non-finite {', '.join(bad)} at iteration {self.iteration + 1}")
-            metrics["objective"] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])
-            metrics["constraint"] = metrics[EPISODE_COST] - metrics[COST_LIMIT]  # ≤ 0 is feasible
-            metrics["wall_time_s"] = float(r.get("time_total_s", 0.0))
+            metrics[OBJECTIVE] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])
+            metrics[CONSTRAINT] = metrics[EPISODE_COST] - metrics[COST_LIMIT]  # ≤ 0 is feasible
+            metrics[WALL_TIME_S] = float(r.get(TIME_TOTAL_S, 0.0))
             if metrics[ENV_STEPS] > self.logged_up_to:
                 self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
             done = metrics[ENV_STEPS] >= self.timesteps
@@ -132,13 +135,7 @@ class LACTrainable(tune.Trainable):
             # checks one against the other (sweeps/integrity.py).
             self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
             self.tracker.log_artifacts(os.path.join(tmp, "checkpoint"), "checkpoint")
-            history = self.tracker.client.get_metric_history(self.tracker.run_id, EPISODE_RETURN)
-            costs = self.tracker.client.get_metric_history(self.tracker.run_id, EPISODE_COST)
-            import pandas as pd
-
-            curve = pd.DataFrame({"env_steps": [m.step for m in history], "episode_return": [m.value for m in history],
-                                  "episode_cost": [m.value for m in costs[:len(history)]],
-                                  "cost_limit": self.lac_config.effective_cost_limit})
+            curve = learning_curve(self.tracker.client, self.tracker.run_id, self.lac_config.effective_cost_limit)
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint"})

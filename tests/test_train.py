@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from lac_rllib.algorithms.lac.config import build_config
-from lac_rllib.algorithms.lac.learner import LANGEVIN_AT_BOUND
+from lac_rllib.constrained.metrics import LANGEVIN_AT_BOUND
 from lac_rllib.train import CONFIG, PROGRESS, check_output, run_config, train
 
 TINY = ["--set", "env_steps_per_iteration=500", "--set", "replay_capacity=2000", "--set", "random_iterations=1"]
@@ -63,6 +63,30 @@ def test_a_stopped_run_resumes_from_its_last_checkpoint(ray_session, tmp_path):
     assert summary["env_steps"] == 2500 and summary["iterations"] == 5
     assert all(rows[i]["time_s"] < rows[i + 1]["time_s"] for i in range(4))
 
+
+@pytest.mark.slow
+def test_resuming_a_finished_run_says_so_and_returns_its_summary(ray_session, tmp_path):
+    """--resume of a run that already reached --timesteps trains nothing: it says the run is
+    finished and returns the summary the run ended with (its last row, its checkpoint)."""
+    out = str(tmp_path / "run")
+    config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+                                                     "random_iterations": 1}, timesteps=1000)
+    first = train(config, 1000, out, log=lambda *a, **k: None)
+    progress = (tmp_path / "run" / PROGRESS).read_text()
+    checkpoint_files = {p: p.stat().st_mtime_ns for p in (tmp_path / "run" / "checkpoint").rglob("*")}
+    lines = []
+    again = train(config, 1000, out, log=lambda line, **_: lines.append(line), resume=True)
+    assert not any(line.startswith("iter ") for line in lines), lines  # nothing trained
+    assert any("is finished" in line and "1000 of 1000 env steps" in line for line in lines), lines
+    assert (tmp_path / "run" / PROGRESS).read_text() == progress
+    assert {p: p.stat().st_mtime_ns for p in (tmp_path / "run" / "checkpoint").rglob("*")} == checkpoint_files
+
+    def without_wall_time(summary):  # the first run's wall time also counts its final checkpoint's write
+        return json.dumps({k: v for k, v in summary.items() if k != "wall_time_s"}, default=str)
+
+    assert without_wall_time(again) == without_wall_time(first)
+    assert (again["env_steps"], again["iterations"]) == (1000, 2)
+    assert again["wall_time_s"] == round(json.loads(progress.splitlines()[-1])["time_s"], 2) <= first["wall_time_s"]
 
 
 def test_resume_may_change_speed_fields_only(tmp_path):

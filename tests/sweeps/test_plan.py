@@ -42,3 +42,57 @@ def test_table_3_itself_is_the_paper_budget_and_says_what_it_costs(tmp_path, mon
     cli.print_plan(plan, args)
     out = capsys.readouterr().out
     assert f"{plan.estimated_cpu_h:.1f} CPU-hours" in out and "docker/README.md" in out  # points to a cluster
+
+
+def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypatch):
+    """The Button tasks run T = 50 (their own override, over the preset's and LAC's 30): the plan's
+    estimate counts T = 50, and the user's --set wins over the task's own value."""
+    steps = 2_500_000
+    chain = cli.CHAIN_S_PER_STEP["safety_gym"] * steps
+
+    def formula(t):  # one trial, 1 CPU: the estimate is this trial's
+        return cli.STARTUP_S + steps / cli.RATE["safety_gym"] + chain * t
+
+    args = ("--space", "paper", "--task", "SafetyPointButton1-v0", "--budget", "paper", "--seeds", "1")
+    plan = _plan(tmp_path, monkeypatch, *args)
+    (trial,) = plan.trials
+    assert trial.lac_params["langevin_steps"] == 50
+    assert plan.estimated_wall_s == pytest.approx(formula(50))
+    assert formula(50) > 1.3 * formula(30)  # T = 30 would count ~2 hours less
+    assert plan.estimated_cpu_h == pytest.approx(formula(50) / 3600)
+    plan = _plan(tmp_path, monkeypatch, *args, "--set", "langevin_steps=70")
+    assert plan.trials[0].lac_params["langevin_steps"] == 70
+    assert plan.estimated_wall_s == pytest.approx(formula(70))
+    # A search is estimated at the fields its trials start from: the task's own T as well.
+    plan = _plan(tmp_path, monkeypatch, "--space", "search", "--task", "SafetyPointButton1-v0", "--budget", "paper",
+                 "--seeds", "1", "--num-samples", "2", "--max-concurrent", "1")
+    assert plan.estimated_wall_s == pytest.approx(2 * formula(50))
+
+
+def test_trial_fields_are_resolved_once_in_order(tmp_path, monkeypatch):
+    """preset < task's own overrides < budget < --set < swept value, in the plan's trials and in a
+    search trial (resolved in the trial from what Optuna sampled, by the same function)."""
+    from lac_rllib.algorithms.lac.config import PRESETS
+    from sweeps import spaces
+
+    plan = _plan(tmp_path, monkeypatch, "--space", "ablation", "--set", "langevin_steps=15", "--set", "beta=2.0")
+    by_label = {t.label(): t.lac_params for t in plan.trials}
+    assert PRESETS["tiny"]["langevin_steps"] == 10  # the preset ...
+    budget = spaces.BUDGETS["quick"].for_preset("tiny")[1]
+    assert budget["langevin_steps"] == 20 and budget["num_envs_per_env_runner"] == 10  # ... < the budget ...
+    vt10 = by_label["VT-langevin_steps=10-PointHazard-v0-s0"]
+    assert (vt10["langevin_steps"], vt10["beta"], vt10["num_envs_per_env_runner"]) == (10, 2.0, 10)  # < swept
+    pr = by_label["PR-beta=0.5-PointHazard-v0-s0"]
+    assert (pr["langevin_steps"], pr["beta"]) == (15, 0.5)  # --set < swept, budget < --set
+    assert pr["replay_capacity"] == PRESETS["tiny"]["replay_capacity"]  # the preset where nothing else sets it
+    # No trial runs the defaults any more (T = 15 is not swept), so none is flagged as the baseline.
+    assert not any(t.default for t in plan.trials)
+    # A search trial: its sampled values over the sweep's budget and --set, default when they change nothing.
+    config = {"task": "SafetyPointButton1-v0", "budget": "smoke", "sets": {"beta": 2.0},
+              "overrides": {"langevin_steps": 40, "beta": 3.0}, "__trial_index__": 1}
+    spec = spaces.trial_spec(config)
+    assert spec.seed == 1 and spec.sampled == {"langevin_steps": 40, "beta": 3.0} and not spec.default
+    assert spec.lac_params == spaces.trial_params("SafetyPointButton1-v0", "smoke", {}, spec.sampled)
+    assert (spec.lac_params["langevin_steps"], spec.lac_params["replay_capacity"]) == (40, 2_000)
+    same = spaces.trial_spec({**config, "overrides": {"langevin_steps": 50, "beta": 2.0}})
+    assert same.default and same.lac_params["langevin_steps"] == 50  # the task's own T, sampled again

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
-from lac_rllib.algorithms.lac.learner import CHAIN_HEALTH_KEYS
+from lac_rllib.constrained.metrics import CHAIN_HEALTH_KEYS
 from sweeps import run as cli
 from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
 from sweeps.trainable import objective
@@ -166,7 +166,7 @@ def _wait_for_children(tmp_path, ready, timeout=300, name="smoke-PointHazard-v0-
         if (tmp_path / "ray_results" / name / "sweep.json").exists():
             try:
                 _, _, children = _runs(tmp_path)
-            except Exception:  # noqa: BLE001 - the store may be mid-creation
+            except Exception:  # the store may be mid-creation
                 continue
             if ready(children):
                 break

@@ -30,7 +30,7 @@ SMALL = dict(
     # hazards; the default ×0.1 head acts near 0 and (seed 5, PointGoal1) never touches one.
     actor_mean_init_scale=None,
     # One env per runner: the replay below walks the episodes in sampling order (vector envs are
-    # checked on the cost probe, tests/test_algorithm.py); no compile for a 2-step 32-wide chain.
+    # checked on the cost probe, tests/algorithms/lac/test_algorithm.py); no compile for a 2-step 32-wide chain.
     num_envs_per_env_runner=1, langevin_fused=False,
 )
 
