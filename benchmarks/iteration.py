@@ -153,9 +153,9 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
         algo.learner_group.update = clock.wrap("learner", algo.learner_group.update)
         calls = []
 
-        def chain(critics, obs, *args, steps, **kwargs):
-            calls.append((obs.shape[0], steps))
-            return original_chain(critics, obs, *args, steps=steps, **kwargs)
+        def chain(critics, obs, mean, log_std, nu, settings, **kwargs):
+            calls.append((obs.shape[0], settings.steps))
+            return original_chain(critics, obs, mean, log_std, nu, settings, **kwargs)
 
         module_mod.langevin_chain = clock.wrap("chain", chain)
         t0 = time.perf_counter()

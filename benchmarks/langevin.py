@@ -27,7 +27,7 @@ import time
 
 import torch
 
-from lac_rllib.algorithms.lac.langevin import langevin_chain, naive_langevin_chain
+from lac_rllib.algorithms.lac.langevin import ChainSettings, langevin_chain, naive_langevin_chain
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows
 
 TASK_DIMS = {"PointGoal1": (60, 2), "Humanoid": (376, 17)}
@@ -62,8 +62,9 @@ def _chain_case(obs_dim: int, act_dim: int, batch: int, repeats: int, dtypes: li
         def run():
             with torch.no_grad():
                 mean, log_std = actor(obs)
-            return langevin_chain(critics, obs, mean, log_std, noise=noise, low=low, high=high,
-                                  fused=fused, dtype=dtype, **CHAIN)
+            settings = ChainSettings(low=low, high=high, fused=fused, dtype=dtype,
+                                     **{k: v for k, v in CHAIN.items() if k != "nu"})
+            return langevin_chain(critics, obs, mean, log_std, CHAIN["nu"], settings, noise=noise)
         return run
 
     def naive(param_grads: bool):
