@@ -86,6 +86,12 @@ def check_output(output: str, config: LACConfig, resume: bool) -> None:
     if diff:
         raise ValueError("--resume: the run in {} was started with other settings: {}".format(
             output, ", ".join(f"{k}={old.get(k)!r} (now {new.get(k)!r})" for k in diff)))
+    from lac_rllib.evaluation import CheckpointError, read_metadata
+
+    try:  # a checkpoint another lac-rllib version wrote names classes this one may not have
+        read_metadata(resumable_checkpoint(output))
+    except CheckpointError as e:
+        raise ValueError(f"--resume: {e}") from None
 
 
 def _save(algo, output: str) -> str:

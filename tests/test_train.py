@@ -6,7 +6,9 @@ import sys
 
 import pytest
 
+import lac_rllib
 from lac_rllib.algorithms.lac.config import build_config
+from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 from lac_rllib.constrained.metrics import LANGEVIN_AT_BOUND
 from lac_rllib.train import CONFIG, PROGRESS, check_output, run_config, train
 
@@ -37,6 +39,11 @@ def test_lac_train_command_runs_and_refuses_to_mix_runs(tmp_path):
                        cwd=tmp_path)
     assert other.returncode == 2 and "beta=0.0 (now 1.0)" in other.stderr
     assert len((out / PROGRESS).read_text().splitlines()) == 2
+    # A checkpoint another lac-rllib version wrote (its classes may live elsewhere) is refused in one line.
+    meta_file = out / "checkpoint" / "rllib_checkpoint.json"
+    meta_file.write_text(json.dumps({**json.loads(meta_file.read_text()), "lac_rllib_version": "0.1.0"}))
+    old = _lac_train("--timesteps", "1000", "--output", str(out), *TINY, "--resume", cwd=tmp_path)
+    assert old.returncode == 2 and "version mismatch: written by lac-rllib 0.1.0" in old.stderr, old.stderr[-500:]
 
 
 class _Stop(Exception):
@@ -98,6 +105,9 @@ def test_resume_may_change_speed_fields_only(tmp_path):
     started["torch_threads"] = 2
     (tmp_path / CONFIG).write_text(json.dumps(started))
     (tmp_path / "checkpoint").mkdir()
+    (tmp_path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({  # what SafeAlgorithm writes
+        "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
+        "lac_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
     check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 4}, timesteps=1000),
                  resume=True)
     with pytest.raises(ValueError, match=r"started with other settings: beta=0.0 \(now 0.5\)$"):
