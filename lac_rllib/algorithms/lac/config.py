@@ -148,12 +148,16 @@ class LACParams(SafeTaskParams):
     False: from the first gradient step."""
     lr_schedule: str = param("linear", accepts=one_of(LR_SCHEDULES))
     """"linear": both learning rates decay linearly from their start to lr_final_fraction × start
-    over total_env_steps [C], through RLlib's lr schedules; "constant": no decay."""
+    over lr_decay_horizon env steps [C], through RLlib's lr schedules; "constant": no decay."""
     lr_final_fraction: float = param(0.5, accepts=FRACTION)
     """The learning rates at the end of the budget, as a fraction of their start [C: 0.5]."""
+    lr_decay_horizon: int | None = param(None, accepts=or_none(INT_GE_1))
+    """Env steps over which the linear decay runs to lr_final_fraction [C: its whole budget]; None =
+    the run's own budget (total_env_steps). The Safety-Gym and MuJoCo presets set the paper's 2.5M,
+    so a shorter run decays part way, as [C]'s would at that step (docs/spec.md §5)."""
     total_env_steps: int | None = param(None, accepts=or_none(INT_GE_1))
-    """The run's budget in env steps, the horizon of the linear lr decay. lac-train and the sweep
-    set it from their budget; required when lr_schedule is "linear"."""
+    """The run's budget in env steps: lac-train and the sweep set it from theirs. The lr decay's
+    horizon where lr_decay_horizon is None."""
     num_envs_per_env_runner: int = param(1, accepts=INT_GE_1)
     """Envs each env runner steps together (RLlib's own field, a gymnasium SyncVectorEnv) [D]:
     RLlib's per-step work (connectors, episode bookkeeping) is then paid once per batch of envs
@@ -175,9 +179,11 @@ class LACParams(SafeTaskParams):
 # Table 4 (MuJoCo) and Table 5 (Safety Gym), docs/spec.md §5. "tiny" [D] sizes lac/PointHazard-v0
 # to learn in about a minute on 2 cores: small nets, short chains, a larger α_ν for its ten times
 # smaller cost limit, no chain clip (why each, measured: docs/spec.md §5, "The tiny preset").
+PAPER_BUDGET = 2_500_000  # env steps of every paper task [P]; [C]'s lr decay horizon (125 × 20k)
 PRESETS: dict[str, dict[str, Any]] = {
-    "mujoco": {"env_steps_per_iteration": 5000, "num_envs_per_env_runner": 5},
-    "safety_gym": {"env_steps_per_iteration": 20_000, "num_envs_per_env_runner": 10},
+    "mujoco": {"env_steps_per_iteration": 5000, "num_envs_per_env_runner": 5, "lr_decay_horizon": PAPER_BUDGET},
+    "safety_gym": {"env_steps_per_iteration": 20_000, "num_envs_per_env_runner": 10,
+                   "lr_decay_horizon": PAPER_BUDGET},
     "tiny": {
         "env_steps_per_iteration": 1000,
         "replay_capacity": 10_000,
@@ -241,17 +247,23 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         for name, value in self.lac_params().items():
             check_field(name, value)
         self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
-        if self.lr_schedule == "linear" and self.total_env_steps is None:
+        if self.lr_schedule == "linear" and self.lr_decay_horizon is None and self.total_env_steps is None:
             raise ValueError(
-                "LAC config field total_env_steps=None is invalid with lr_schedule='linear' (the decay "
-                "needs the run's budget); accepted: an integer >= 1, or lr_schedule='constant'")
+                "LAC config field total_env_steps=None is invalid with lr_schedule='linear' and no "
+                "lr_decay_horizon (the decay needs a horizon); accepted: an integer >= 1, an "
+                "lr_decay_horizon, or lr_schedule='constant'")
 
     def lr_or_schedule(self, lr: float):
-        """``lr`` as RLlib's ``lr_or_lr_schedule``: piecewise-linear [[0, lr], [budget, f·lr]] in
-        env steps (RLlib's Scheduler holds the last value after the budget), or the constant."""
+        """``lr`` as RLlib's ``lr_or_lr_schedule``: piecewise-linear [[0, lr], [horizon, f·lr]] in
+        env steps (RLlib's Scheduler holds the last value after the horizon), or the constant."""
         if self.lr_schedule == "constant":
             return lr
-        return [[0, lr], [int(self.total_env_steps), lr * self.lr_final_fraction]]
+        return [[0, lr], [self.lr_horizon, lr * self.lr_final_fraction]]
+
+    @property
+    def lr_horizon(self) -> int:
+        """The env steps the linear decay runs over: lr_decay_horizon, else the run's budget."""
+        return int(self.lr_decay_horizon if self.lr_decay_horizon is not None else self.total_env_steps)
 
     @override(AlgorithmConfig)
     def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
@@ -318,7 +330,8 @@ def parse_sets(pairs: list[str]) -> dict:
 SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
 #: Fields added after runs and checkpoints already existed, with the value that reproduces what
 #: such a run did (read where an old run's settings or an old checkpoint's model config lack them).
-LEGACY_VALUES = {"langevin_fused": False, "langevin_dtype": "float32", "num_envs_per_env_runner": 1}
+LEGACY_VALUES = {"langevin_fused": False, "langevin_dtype": "float32", "num_envs_per_env_runner": 1,
+                 "lr_decay_horizon": None}
 
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,

@@ -188,6 +188,23 @@ def test_learning_rates_decay_to_half_over_the_budget(ray_session, schedule):
         assert end[name] == pytest.approx(lr0 * factor) and after[name] == pytest.approx(lr0 * factor)
 
 
+def test_a_run_shorter_than_the_decay_horizon_decays_part_way(ray_session):
+    """The horizon is its own field: a run of 1/5 of it (as 500k steps of the presets' 2.5M) ends at
+    1 − 0.5/5 = 0.9× its learning rates, read from the optimizers."""
+    config = tiny_config(PROBE, obs_normalization=False, env_steps_per_iteration=50, replay_capacity=1000,
+                         lac_minibatch_size=16, total_env_steps=100, lr_decay_horizon=500)
+    algo = config.build_algo()
+    try:
+        start = _optimizer_lrs(algo)
+        for _ in range(2):  # the run's 100 env steps
+            algo.train()
+        end = _optimizer_lrs(algo)
+    finally:
+        algo.stop()
+    for name, lr0 in start.items():
+        assert end[name] == pytest.approx(0.9 * lr0)
+
+
 def test_nu_bound_is_two_then_the_ratio_of_mean_targets(ray_session):
     # Cost limit 0 and α_ν = 1: every iteration ν would jump by Ĵ_C = 49, so the bound decides it.
     config = tiny_config(PROBE, obs_normalization=False, env_steps_per_iteration=50, cost_limit=0.0,
