@@ -22,7 +22,7 @@ from ray.rllib.connectors.learner import (
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.lac.energy import DTYPES as LANGEVIN_DTYPES
+from lac_rllib.algorithms.lac.energy import DTYPE_CHOICES as LANGEVIN_DTYPES
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
@@ -83,10 +83,12 @@ class LACParams(SafeTaskParams):
     one-off compile per process (figures: docs/speed.md). False: the eager hand-written backward;
     it is also the fallback, with a warning, where compiling fails."""
     langevin_dtype: str = param("float32", accepts=one_of(LANGEVIN_DTYPES))
-    """Input dtype of the chain's critic matmuls: "float32" | "bfloat16" (action, energy and update
-    stay float32) [D]. float32 by default: bfloat16 pays only on CPUs with native bf16 matmuls
-    (AVX512-BF16, AMX) and is far slower elsewhere (docs/speed.md); its end points differ from
-    float32's by far less than the chain's own noise (tests/algorithms/lac/test_energy.py)."""
+    """Input dtype of the chain's critic matmuls (action, energy and update stay float32) [D]:
+    "float32", "bfloat16", or "auto" = bfloat16 on a CPU with native bf16 matmuls (AVX512-BF16,
+    AMX), float32 elsewhere, decided where the module is built. float32 by default: bfloat16 is far
+    slower without native support (docs/speed.md), and its learning curve is checked against
+    float32's in docs/fidelity/; its end points differ from float32's by far less than the chain's
+    own noise (tests/algorithms/lac/test_energy.py)."""
 
     # --- critics (docs/spec.md §2, eqs. 12-13) ---
     cost_gamma: float = param(0.99, accepts=FRACTION)

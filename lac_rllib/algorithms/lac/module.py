@@ -24,6 +24,7 @@ from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.config import LEGACY_VALUES
+from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
 
@@ -131,5 +132,5 @@ def chain_settings(cfg: dict, action_space) -> ChainSettings:
         grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
         # Checkpoints written before these fields existed ran the eager float32 chain.
         fused=cfg.get("langevin_fused", LEGACY_VALUES["langevin_fused"]),
-        dtype=cfg.get("langevin_dtype", LEGACY_VALUES["langevin_dtype"]),
+        dtype=resolve_dtype(cfg.get("langevin_dtype", LEGACY_VALUES["langevin_dtype"])),
     )

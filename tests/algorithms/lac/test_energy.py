@@ -100,3 +100,19 @@ def test_unknown_dtype_is_refused():
     critics, obs, mean, log_std, kw = _case()
     with pytest.raises(ValueError, match="float16.*accepted: float32 | bfloat16"):
         chain(critics, obs, mean, log_std, dtype="float16", **kw)
+
+
+def test_auto_dtype_is_bfloat16_only_with_native_bf16_matmuls(monkeypatch):
+    import gymnasium as gym
+
+    from lac_rllib.algorithms.lac.config import LACConfig
+    from lac_rllib.algorithms.lac.module import chain_settings
+
+    cfg = {**LACConfig().training(langevin_dtype="auto").lac_params()}
+    space = gym.spaces.Box(-1.0, 1.0, (2,))
+    for flags, expected in (({"avx2", "avx512f"}, "float32"), ({"avx2", "avx512_bf16"}, "bfloat16"),
+                            ({"amx_bf16"}, "bfloat16"), (set(), "float32")):
+        monkeypatch.setattr(energy_module, "cpu_flags", lambda flags=flags: flags)
+        assert energy_module.resolve_dtype("auto") == expected
+        assert chain_settings(cfg, space).dtype == expected  # decided where the module is built
+    assert energy_module.resolve_dtype("float32") == "float32"  # an explicit dtype is kept
