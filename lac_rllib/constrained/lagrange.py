@@ -145,6 +145,10 @@ class LagrangeMultiplier:
     def value(self) -> float:
         return float(self._value)
 
+    def bind(self, value: torch.Tensor) -> None:
+        """Make ``value`` (the module's ν buffer, e.g. after the module was restored) the value."""
+        self._value = value
+
     @property
     def upper(self) -> float | None:
         """The bound ν is held under now (None: unbounded)."""

@@ -7,9 +7,9 @@ it (eq. 14, docs/spec.md §4), the learning-rate schedules and the next bound af
 
 Each equation is written out, in the notation of docs/spec.md, where it is computed: the critic
 targets (13) in :func:`critic_targets`; the critic loss (12) and the actor loss (15-16) in
-``compute_loss_for_module``; ν's step (14) and its bound ν_max in the module's
-:class:`~lac_rllib.constrained.lagrange.LagrangeMultiplier`; Polyak in ``apply_gradients``. Methods
-marked ``@override`` are RLlib's hooks; the others are LAC's own.
+``compute_loss_for_module``; ν's step (14) and its bound ν_max in each module's
+:class:`~lac_rllib.constrained.lagrange.LagrangeMultiplier` (``self.multipliers``); Polyak in
+``apply_gradients``. Methods marked ``@override`` are RLlib's hooks; the others are LAC's own.
 """
 
 from __future__ import annotations
@@ -218,6 +218,8 @@ class LACTorchLearner(TorchLearner):
     @override(TorchLearner)
     def set_state(self, state) -> None:
         super().set_state(state)
+        for mid, module in self.module.items():  # the module's ν buffer stays the multiplier's value
+            self.multipliers[mid].bind(module.unwrapped().nu)
         self._iteration = int(state.get(STATE_ITERATION, self._iteration))
         for mid, multiplier_state in state.get(STATE_LAGRANGE, {}).items():
             self.multipliers[mid].set_state(multiplier_state)
