@@ -19,7 +19,6 @@ import time
 from lac_rllib.algorithms.lac.config import (
     FIELD_NAMES,
     FIELD_RANGES,
-    LEGACY_VALUES,
     SPEED_FIELDS,
     LACConfig,
     build_config,
@@ -81,7 +80,6 @@ def check_output(output: str, config: LACConfig, resume: bool) -> None:
     with open(os.path.join(output, CONFIG)) as f:
         old = json.load(f)
     new = run_config(config)
-    old = {**LEGACY_VALUES, **old}
     diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in SPEED_FIELDS)
     if diff:
         raise ValueError("--resume: the run in {} was started with other settings: {}".format(

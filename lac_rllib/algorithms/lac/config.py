@@ -327,13 +327,9 @@ def parse_sets(pairs: list[str]) -> dict:
     """``--set FIELD=VALUE`` pairs as LAC fields (values as Python literals); unknown names list the known ones."""
     return fields.parse_sets(pairs, FIELD_NAMES, what="LAC")
 
-#: Fields that set how fast a run goes, not the algorithm: a resumed run may change them (a
-#: run started before they existed resumes with today's values).
+#: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
 SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
-#: Fields added after runs and checkpoints already existed, with the value that reproduces what
-#: such a run did (read where an old run's settings or an old checkpoint's model config lack them).
-LEGACY_VALUES = {"langevin_fused": False, "langevin_dtype": "float32", "num_envs_per_env_runner": 1,
-                 "lr_decay_horizon": None}
+
 
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,

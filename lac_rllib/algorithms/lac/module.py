@@ -23,7 +23,6 @@ from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.lac.config import LEGACY_VALUES
 from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
 from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
@@ -130,7 +129,5 @@ def chain_settings(cfg: dict, action_space) -> ChainSettings:
         low=torch.tensor(np.array(action_space.low), dtype=torch.float32) if clamp else None,
         high=torch.tensor(np.array(action_space.high), dtype=torch.float32) if clamp else None,
         grad_clip=cfg["langevin_grad_clip"], grad_clip_mode=cfg["langevin_grad_clip_mode"],
-        # Checkpoints written before these fields existed ran the eager float32 chain.
-        fused=cfg.get("langevin_fused", LEGACY_VALUES["langevin_fused"]),
-        dtype=resolve_dtype(cfg.get("langevin_dtype", LEGACY_VALUES["langevin_dtype"])),
+        fused=cfg["langevin_fused"], dtype=resolve_dtype(cfg["langevin_dtype"]),
     )
