@@ -48,3 +48,35 @@ def test_no_sys_path_edits_in_package_code():
     offenders = [str(p.relative_to(ROOT)) for d in ("lac_rllib", "sweeps") for p in (ROOT / d).rglob("*.py")
                  if "sys.path.insert" in p.read_text(encoding="utf-8")]
     assert offenders == []
+
+
+def _imports(path: Path) -> set[str]:
+    """The lac_rllib/sweeps modules ``path`` imports (top level or inside functions)."""
+    import ast
+
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+            names.update(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+    return {n for n in names if n.startswith(("lac_rllib", "sweeps"))}
+
+
+def test_imports_go_one_way():
+    """sweeps -> algorithms -> constrained -> tasks; inside an algorithm only RLlib's Config <->
+    Algorithm pattern points back (the config names its algorithm, module and learner classes)."""
+    package = ROOT / "lac_rllib"
+    bad = []
+    for path in sorted(package.rglob("*.py")):
+        mine, rel = _imports(path), str(path.relative_to(ROOT))
+        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/", "lac_rllib/algorithms/")):
+            bad += [f"{rel} imports {m}" for m in mine if m.startswith("sweeps")]
+        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/")):
+            bad += [f"{rel} imports {m}" for m in mine if m.startswith("lac_rllib.algorithms")]
+        if rel.startswith("lac_rllib/tasks/"):
+            bad += [f"{rel} imports {m}" for m in mine if m.startswith("lac_rllib.constrained")]
+        if rel.startswith("lac_rllib/algorithms/lac/") and not rel.endswith(("config.py", "algorithm.py")):
+            bad += [f"{rel} imports {m}" for m in mine if m.startswith("lac_rllib.algorithms.lac.config")]
+    assert bad == []
