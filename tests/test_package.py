@@ -51,7 +51,7 @@ def test_no_sys_path_edits_in_package_code():
 
 
 def _imports(path: Path) -> set[str]:
-    """The lac_rllib/sweeps modules ``path`` imports (top level or inside functions)."""
+    """The modules of lac_rllib and sweeps that ``path`` imports (top level or inside functions)."""
     import ast
 
     names = set()

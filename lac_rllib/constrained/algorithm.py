@@ -97,7 +97,7 @@ class SafeAlgorithm(Algorithm):
         def reseed(runner) -> None:
             # RLlib's SingleAgentEnvRunner seeds its envs with its private ``_seed`` at the reset
             # that ``_needs_initial_reset`` asks for, and has no public way to reseed
-            # (docs/dependencies.md; tests/constrained/test_algorithm.py breaks if that changes).
+            # (docs/dependencies.md; tests/constrained/test_safe_algorithm.py breaks if that changes).
             # Every runner gets seed + worker index, as at construction.
             runner._seed = seed + (runner.worker_index or 0)
             runner._needs_initial_reset = True
