@@ -189,6 +189,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output", required=True, help="directory for the checkpoint and logs")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a LAC config field")
     parser.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0 = sample in the driver)")
+    parser.add_argument("--cpus", type=int, default=1,
+                        help="CPUs of the run: as many env runners sample and as many torch threads update, the same "
+                             "algorithm (num_envs_per_env_runner must split evenly over them)")
     parser.add_argument("--checkpoint-every", type=int, default=5,
                         help="iterations between checkpoints, replay buffer included (0 = only at the end)")
     parser.add_argument("--resume", action="store_true",
@@ -201,11 +204,12 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--checkpoint-every {args.checkpoint_every} is invalid; accepted: an integer >= 0")
         if args.num_env_runners < 0:
             raise ValueError(f"--num-env-runners {args.num_env_runners} is invalid; accepted: an integer >= 0")
-        config = build_config(args.task, args.seed, parse_sets(args.set), args.num_env_runners, args.timesteps)
+        config = build_config(args.task, args.seed, parse_sets(args.set), args.num_env_runners, args.timesteps,
+                              cpus=args.cpus)
         check_output(args.output, config, args.resume)
     except ValueError as e:
         parser.exit(2, f"lac-train: error: {e}\n")
-    start_ray(num_cpus=max(2, args.num_env_runners + 1))
+    start_ray(num_cpus=max(2, args.num_env_runners + 1, args.cpus))
     summary = train(config, args.timesteps, args.output, checkpoint_every=args.checkpoint_every, resume=args.resume)
     print(json.dumps(summary, default=str), flush=True)
     return 0

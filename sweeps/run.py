@@ -40,7 +40,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seeds", type=int, default=3, help="seeds per configuration (search: per Optuna sample)")
     p.add_argument("--num-samples", type=int, default=20, help="Optuna samples, i.e. configurations (search space)")
     p.add_argument("--max-concurrent", type=int, default=None, help="trials at once (default: CPUs / cpus-per-trial)")
-    p.add_argument("--cpus-per-trial", type=int, default=1, help="CPUs (and torch threads) per trial")
+    p.add_argument("--cpus-per-trial", type=int, default=1,
+                   help="CPUs per trial: as many env runners sample and as many torch threads update")
     p.add_argument("--scheduler", choices=("none", "asha"), default="none")
     p.add_argument("--address", default=None, help="Ray cluster address (host:port or auto); default: local Ray")
     p.add_argument("--tracking-uri", default=None,
@@ -135,6 +136,10 @@ def make_plan(args) -> Plan:
     # budget < --set < swept value); a search sample is resolved in its trial the same way.
     trials = (spaces.resolve_trials(spaces.grid(args.space, task, args.seeds, args.budget), args.budget, sets)
               if args.space != "search" else None)
+    from lac_rllib.algorithms.lac.config import check_cpus
+
+    for params in [t.lac_params for t in trials] if trials else [spaces.trial_params(task, args.budget, sets)]:
+        check_cpus(params["num_envs_per_env_runner"], args.cpus_per_trial, "--cpus-per-trial")
     # search: each Optuna sample is trained with every seed (sweeps/sweep.py, SeedRepeater)
     n_trials = len(trials) if trials is not None else args.num_samples * args.seeds
     concurrency = min(args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial), n_trials)

@@ -69,9 +69,11 @@ class LACTrainable(tune.Trainable):
     def setup(self, config: dict) -> None:
         self.spec = spec = spaces.trial_spec(config)
         self.timesteps = int(config["timesteps"])
-        # The trial's fields as resolved (spaces.trial_params); the torch threads are its CPUs.
-        overrides = {**spec.lac_params, "torch_threads": int(config.get("cpus", 1))}
-        self.lac_config = build_config(spec.task, spec.seed, overrides, timesteps=self.timesteps)
+        # The trial's fields as resolved (spaces.trial_params), run on its CPUs (env runners and
+        # torch threads: lac_rllib.algorithms.lac.config.use_cpus).
+        cpus = int(config.get("cpus", 1))
+        overrides = {**spec.lac_params, "torch_threads": cpus}
+        self.lac_config = build_config(spec.task, spec.seed, overrides, timesteps=self.timesteps, cpus=cpus)
         self.algo = self.lac_config.build_algo()
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,

@@ -333,14 +333,42 @@ SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_th
 
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None) -> LACConfig:
+                 timesteps: int | None = None, cpus: int = 1) -> LACConfig:
     """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed).
 
-    The budget is the horizon of the learning-rate decay unless ``sets`` names another.
+    The budget is the horizon of the learning-rate decay unless ``sets`` or the preset names another.
+    ``cpus`` > 1 runs the same algorithm on that many CPUs (:func:`use_cpus`).
     """
     if timesteps is not None:
         sets = {"total_env_steps": int(timesteps), **sets}
     config = LACConfig().task(task).training(**sets).debugging(seed=seed)
     config.env_runners(num_env_runners=num_env_runners)
+    if cpus > 1:
+        if num_env_runners:
+            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
+                             "accepted: one of the two")
+        use_cpus(config, cpus)
     config.validate()
     return config
+
+
+def use_cpus(config: LACConfig, cpus: int) -> None:
+    """Sample with ``cpus`` env runners and update with ``cpus`` torch threads: the same algorithm
+    (sample, then update, each iteration) on more CPUs. The envs of an iteration stay the same:
+    ``num_envs_per_env_runner`` envs split evenly over the runners (10 → 2 × 5), so an iteration
+    holds the same episodes, and ν (eq. 14) reads as many completed ones, as on one CPU. The
+    runners reserve no CPU of their own: sampling and updating take turns on the run's CPUs."""
+    envs = config.num_envs_per_env_runner
+    check_cpus(envs, cpus)
+    if cpus == 1:
+        return
+    config.env_runners(num_env_runners=cpus, num_envs_per_env_runner=envs // cpus, num_cpus_per_env_runner=0)
+    config.training(torch_threads=cpus)
+
+
+def check_cpus(envs: int, cpus: int, flag: str = "--cpus") -> None:
+    """Raise a ValueError naming the accepted CPU counts unless ``envs`` envs split evenly over ``cpus``."""
+    if not (isinstance(cpus, int) and cpus >= 1) or envs % cpus:
+        divisors = ", ".join(str(d) for d in range(1, envs + 1) if envs % d == 0)
+        raise ValueError(f"{flag} {cpus} is invalid with num_envs_per_env_runner={envs}: the envs must split evenly "
+                         f"over the env runners; accepted: {divisors} (or --set num_envs_per_env_runner=...)")

@@ -349,3 +349,46 @@ def test_a_nan_gradient_is_zeroed_as_torch_learner_does(ray_session):
         assert all(torch.isfinite(t).all() for t in module.target_critics.parameters())
     finally:
         algo.stop()
+
+
+def test_two_cpus_hold_the_same_episodes_and_repeat_exactly(ray_session):
+    """cpus=2 (lac-train --cpus, the sweep's --cpus-per-trial): two env runners with half the envs
+    each, two learner threads. An iteration holds as many completed episodes as on one CPU, with the
+    same costs (ν's step reads them), and a seeded 2-CPU run repeats exactly."""
+    from lac_rllib.algorithms.lac.config import use_cpus
+    from lac_rllib.constrained.metrics import EPISODES_THIS_ITER
+
+    threads = torch.get_num_threads()
+
+    def run(cpus):
+        config = tiny_config(PROBE, seed=5, obs_normalization=False, env_steps_per_iteration=100, cost_limit=40.0,
+                             nu_lr=0.01, replay_capacity=1000, lac_minibatch_size=16, num_envs_per_env_runner=2)
+        use_cpus(config, cpus)
+        assert (config.num_env_runners, config.num_envs_per_env_runner) == ((0, 2) if cpus == 1 else (2, 1))
+        algo = config.build_algo()
+        try:
+            rows = [(r[EPISODES_THIS_ITER], r[EPISODE_COST], r[NU]) for r in (algo.train() for _ in range(3))]
+            state = algo.learner_group.get_state(components="learner/rl_module")["learner"]["rl_module"]
+        finally:
+            algo.stop()
+            torch.set_num_threads(threads)  # the local learner set its threads in this process
+        return rows, state[DEFAULT_MODULE_ID]
+
+    one, _ = run(1)
+    two_a, weights_a = run(2)
+    two_b, weights_b = run(2)
+    assert all(n > 0 for n, *_ in one) and one[-1][2] > 0  # episodes complete, ν moves
+    assert one == two_a  # the same episodes, costs and ν on one CPU and on two
+    assert two_a == two_b
+    for k in weights_a:
+        np.testing.assert_array_equal(np.asarray(weights_a[k]), np.asarray(weights_b[k]), err_msg=k)
+
+
+def test_cpus_must_split_the_envs_evenly():
+    from lac_rllib.algorithms.lac.config import build_config
+
+    with pytest.raises(ValueError, match=r"--cpus 3 is invalid with num_envs_per_env_runner=10.*accepted: 1, 2, 5, 10"):
+        build_config("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=3)
+    config = build_config("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=2)
+    assert (config.num_env_runners, config.num_envs_per_env_runner, config.torch_threads) == (2, 5, 2)
+    assert config.num_cpus_per_env_runner == 0  # sampling and updating take turns on the run's CPUs
