@@ -18,6 +18,7 @@ from ray.tune.schedulers import ASHAScheduler
 from ray.tune.search import Repeater
 from ray.tune.search.optuna import OptunaSearch
 
+from lac_rllib.algorithms.lac.config import run_resources
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE
 from sweeps import spaces
 from sweeps.live_table import LiveTable
@@ -187,7 +188,8 @@ def print_links(links: dict, uri: str | None = None) -> None:
 def _tuner(plan: Plan, args, parent: str, sweep_dir: Path) -> tune.Tuner:
     """Tune's state if the sweep has one (resume), else a new Tuner (also for a sweep whose
     first start failed before Tune wrote anything)."""
-    trainable = tune.with_resources(LACTrainable, {"cpu": args.cpus_per_trial})
+    # A multi-CPU trial reserves a bundle per env runner, where RLlib places them (config.run_resources).
+    trainable = tune.with_resources(LACTrainable, run_resources(args.cpus_per_trial))
     if args.resume and tune.Tuner.can_restore(str(sweep_dir)):
         return tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True, resume_errored=False)
     failure = tune.FailureConfig(max_failures=args.max_failures)

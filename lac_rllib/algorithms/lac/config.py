@@ -356,14 +356,31 @@ def use_cpus(config: LACConfig, cpus: int) -> None:
     """Sample with ``cpus`` env runners and update with ``cpus`` torch threads: the same algorithm
     (sample, then update, each iteration) on more CPUs. The envs of an iteration stay the same:
     ``num_envs_per_env_runner`` envs split evenly over the runners (10 → 2 × 5), so an iteration
-    holds the same episodes, and ν (eq. 14) reads as many completed ones, as on one CPU. The
-    runners reserve no CPU of their own: sampling and updating take turns on the run's CPUs."""
+    holds the same episodes, and ν (eq. 14) reads as many completed ones, as on one CPU. Sampling
+    and updating take turns, so the run reserves ``cpus`` CPUs in all: 1 for the driver and its
+    learner, (cpus − 1)/cpus for each runner (:func:`run_resources` for a Tune trial)."""
     envs = config.num_envs_per_env_runner
     check_cpus(envs, cpus)
     if cpus == 1:
         return
-    config.env_runners(num_env_runners=cpus, num_envs_per_env_runner=envs // cpus, num_cpus_per_env_runner=0)
+    config.env_runners(num_env_runners=cpus, num_envs_per_env_runner=envs // cpus,
+                       num_cpus_per_env_runner=runner_cpus(cpus))
     config.training(torch_threads=cpus)
+
+
+def runner_cpus(cpus: int) -> float:
+    """The CPU share each of a ``cpus``-CPU run's env runners reserves (the driver reserves 1)."""
+    return (cpus - 1) / cpus
+
+
+def run_resources(cpus: int):
+    """What a Tune trial of a ``cpus``-CPU run reserves: the driver's bundle (it holds the learner)
+    and one bundle per env runner, which RLlib places its runners in (``cpus`` CPUs in all)."""
+    from ray.tune import PlacementGroupFactory
+
+    if cpus == 1:
+        return {"cpu": 1}
+    return PlacementGroupFactory([{"CPU": 1.0}] + [{"CPU": runner_cpus(cpus)}] * cpus)
 
 
 def check_cpus(envs: int, cpus: int, flag: str = "--cpus") -> None:
