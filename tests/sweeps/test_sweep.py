@@ -425,3 +425,20 @@ def test_cluster_inputs_must_be_shared(tmp_path, extra, needle, monkeypatch, cap
         port = server.getsockname()[1]
         _check_bad_input(tmp_path, ["--address", f"127.0.0.1:{port}", *[x.format(port=port) for x in extra]], needle,
                          monkeypatch, capsys)
+
+
+@pytest.mark.slow
+def test_a_two_cpu_trial_samples_with_two_env_runners(ray_session, tmp_path):
+    """--cpus-per-trial 2: the trial's placement group holds RLlib's bundles (the driver, one per env
+    runner) within the session's 2 CPUs, and the trial finishes; a split that does not divide the
+    envs is refused before Ray starts."""
+    with pytest.raises(ValueError, match="--cpus-per-trial 2 is invalid with num_envs_per_env_runner=1"):
+        cli.make_plan(_args(tmp_path, "--cpus-per-trial", "2"))
+    args = _args(tmp_path, "--cpus-per-trial", "2", "--set", "num_envs_per_env_runner=2", "--max-concurrent", "1",
+                 "--seeds", "1")
+    assert _sweep(tmp_path, args) == 0
+    _, _, children = _runs(tmp_path)
+    assert len(children) == 2
+    for run in children:
+        assert run.info.status == "FINISHED" and run.data.metrics["env_steps"] == 2000
+        assert run.data.params["num_envs_per_env_runner"] == "1" and run.data.params["torch_threads"] == "2"
