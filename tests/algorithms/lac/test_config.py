@@ -58,6 +58,8 @@ def test_spec_defaults_and_presets():
     assert LACConfig().task("SafetyPointGoal1-v0").env_steps_per_iteration == 20_000  # Table 5
     assert LACConfig().task("focops/AntVelocity-v0").env_steps_per_iteration == 5_000  # Table 4
     assert LACConfig().task("SafetyPointButton1-v0").langevin_steps == 50  # Table 5, Button
+    assert LACConfig().task("SafetyPointGoal1-v0").temperature == 1e-4  # [C], by docs/fidelity/pointgoal1-lambda
+    assert LACConfig().task("focops/AntVelocity-v0").temperature == 1e-3  # Table 4
     # The lr decays over the paper's 2.5M steps on the paper's tasks [C], over the run's budget on the tiny task.
     assert LACConfig().task("SafetyPointGoal1-v0").training(total_env_steps=500_000).lr_horizon == 2_500_000
     assert LACConfig().task("focops/SwimmerVelocity-v0").lr_horizon == 2_500_000
