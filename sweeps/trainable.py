@@ -71,7 +71,7 @@ class LACTrainable(tune.Trainable):
         self.timesteps = int(config["timesteps"])
         # The trial's fields as resolved (spaces.trial_params), run on its CPUs (env runners and
         # torch threads: lac_rllib.algorithms.lac.config.use_cpus).
-        cpus = int(config.get("cpus", 1))
+        cpus = int(config.get("cpus", 1))  # a trial's torch threads are its CPUs, whatever --set says
         overrides = {**spec.lac_params, "torch_threads": cpus}
         self.lac_config = build_config(spec.task, spec.seed, overrides, timesteps=self.timesteps, cpus=cpus)
         self.algo = self.lac_config.build_algo()

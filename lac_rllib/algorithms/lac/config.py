@@ -346,7 +346,7 @@ def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
         sets = {"total_env_steps": int(timesteps), **sets}
     config = LACConfig().task(task).training(**sets).debugging(seed=seed)
     config.env_runners(num_env_runners=num_env_runners)
-    if cpus > 1:
+    if cpus != 1:  # use_cpus refuses 0 or a count that does not split the envs
         if num_env_runners:
             raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
                              "accepted: one of the two")
