@@ -60,6 +60,14 @@ def resumable_checkpoint(output: str) -> str | None:
     return None
 
 
+def _lr_horizon(params: dict):
+    """The lr decay's horizon a run's config.json implies (None: no decay)."""
+    if params.get("lr_schedule") == "constant":
+        return None
+    horizon = params.get("lr_decay_horizon")
+    return horizon if horizon is not None else params.get("total_env_steps")
+
+
 def check_output(output: str, config: LACConfig, resume: bool) -> None:
     """A writable directory that holds no other run (checked before Ray starts)."""
     try:
@@ -81,6 +89,10 @@ def check_output(output: str, config: LACConfig, resume: bool) -> None:
         old = json.load(f)
     new = run_config(config)
     diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in SPEED_FIELDS)
+    if "total_env_steps" in diff and _lr_horizon(old) == _lr_horizon(new):
+        # The budget shapes training only through the lr decay's horizon: with lr_decay_horizon
+        # set (the Safety-Gym and MuJoCo presets) a run may be carried on to a larger budget.
+        diff.remove("total_env_steps")
     if diff:
         raise ValueError("--resume: the run in {} was started with other settings: {}".format(
             output, ", ".join(f"{k}={old.get(k)!r} (now {new.get(k)!r})" for k in diff)))

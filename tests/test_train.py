@@ -110,3 +110,21 @@ def test_resume_may_change_speed_fields_only(tmp_path):
                  resume=True)
     with pytest.raises(ValueError, match=r"started with other settings: beta=0.0 \(now 0.5\)$"):
         check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"beta": 0.5}, timesteps=1000), resume=True)
+
+
+def test_resume_may_raise_the_budget_only_where_the_lr_horizon_stays(tmp_path):
+    """A run with its own lr horizon (the presets' 2.5M) is carried on to a larger budget; a run
+    whose horizon is its budget is not, since a new budget would change its learning rates."""
+    config = build_config("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=1000)
+    (tmp_path / CONFIG).write_text(json.dumps(run_config(config)))
+    (tmp_path / "checkpoint").mkdir()
+    (tmp_path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({
+        "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
+        "lac_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
+    check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=4000),
+                 resume=True)
+    own = build_config("lac/PointHazard-v0", 0, {}, timesteps=1000)
+    assert own.lac_params()["lr_decay_horizon"] is None  # the tiny preset decays over the run's budget
+    (tmp_path / CONFIG).write_text(json.dumps(run_config(own)))
+    with pytest.raises(ValueError, match=r"total_env_steps=1000 \(now 4000\)"):
+        check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {}, timesteps=4000), resume=True)
