@@ -68,7 +68,7 @@ class SafeAlgorithm(Algorithm):
             "seed": cfg.seed,
             "cost_limit": cfg.effective_cost_limit,
             "episode_cost_discount": cfg.effective_episode_cost_discount,
-            "lac_config": cfg.lac_params(),
+            "lac_config": cfg.params(),  # the algorithm's fields (the key name predates the baselines)
         }
         # JSON-safe (tuples -> lists, anything exotic -> str).
         return {**super().get_metadata(), **json.loads(json.dumps(ours, default=str))}

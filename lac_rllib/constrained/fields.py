@@ -95,3 +95,24 @@ def parse_sets(pairs: list[str], names, *, what: str) -> dict:
         except (ValueError, SyntaxError):
             out[name] = raw  # plain strings such as informative / next
     return out
+
+
+class FieldSet:
+    """The fields of one algorithm's params dataclass, with what each accepts: the check, the
+    ``--set`` parser and the docstrings every algorithm's config module exposes (``FIELDS``)."""
+
+    def __init__(self, params_cls, what: str):
+        self.params_cls, self.what = params_cls, what
+        self.ranges: dict[str, Accepted] = accepted_values(params_cls)
+        self.names = frozenset(self.ranges)
+        self.defaults = {f.name: f.default for f in dataclasses.fields(params_cls)}
+
+    def docs(self) -> dict[str, str]:
+        return field_docs(self.params_cls)
+
+    def check(self, name: str, value: Any) -> None:
+        """Raise a ValueError naming the field, the value and the accepted values if ``value`` is bad."""
+        check_value(self.ranges, name, value, what=self.what)
+
+    def parse_sets(self, pairs: list[str]) -> dict:
+        return parse_sets(pairs, self.names, what=self.what)

@@ -57,6 +57,11 @@ class SafeTaskConfig:
 
     #: Preset name → the field values it sets (docs/spec.md §5).
     PRESETS: dict[str, dict[str, Any]] = {}
+    #: The algorithm's params dataclass (a SafeTaskParams) and its FieldSet.
+    PARAMS: type = SafeTaskParams
+    FIELDS = None
+    #: Whether ``.task(id)`` applies the task's own overrides (``TaskSpec.overrides``: LAC fields).
+    APPLY_TASK_OVERRIDES = False
 
     def __init__(self, algo_class=None):
         super().__init__(algo_class=algo_class)
@@ -77,10 +82,14 @@ class SafeTaskConfig:
         if name not in self.PRESETS:
             raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(self.PRESETS)}")
         self.task_id = task_id
-        self.training(**{**self.PRESETS[name], **spec.overrides})
+        self.training(**{**self.PRESETS[name], **(spec.overrides if self.APPLY_TASK_OVERRIDES else {})})
         register_task_env(task_id)
         self.environment(env=task_id)
         return self
+
+    def params(self) -> dict[str, Any]:
+        """The algorithm's own fields (``PARAMS``) as a plain dict: run metadata, config.json, MLflow params."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self.PARAMS)}
 
     @property
     def task_spec(self):

@@ -36,8 +36,6 @@ from lac_rllib.constrained.fields import (
     LAYERS,
     NON_NEGATIVE,
     POSITIVE,
-    accepted_values,
-    check_value,
     one_of,
     or_none,
     param,
@@ -212,6 +210,8 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
     """
 
     PRESETS = PRESETS
+    #: The tasks' own overrides (TaskSpec.overrides, e.g. T = 50 on the Button tasks) are LAC's fields.
+    APPLY_TASK_OVERRIDES = True
 
     def __init__(self, algo_class=None):
         from lac_rllib.algorithms.lac.algorithm import LAC
@@ -242,8 +242,8 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         return self
 
     def lac_params(self) -> dict[str, Any]:
-        """The LAC fields as a plain dict (for run metadata and the RLModule)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(LACParams)}
+        """The LAC fields as a plain dict (for run metadata and the RLModule): ``params()``."""
+        return self.params()
 
     # ----- RLlib hooks -----
     @override(AlgorithmConfig)
@@ -311,24 +311,15 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         return {**super()._model_config_auto_includes, **self.lac_params()}
 
 
-#: Each field's accepted values, as its ``param(..., accepts=...)`` declares them.
-FIELD_RANGES = accepted_values(LACParams)
-FIELD_NAMES = frozenset(FIELD_RANGES)
-
-
-def field_docs() -> dict[str, str]:
-    """Each LAC field's docstring, from the source of :class:`LACParams`."""
-    return fields.field_docs(LACParams)
-
-
-def check_field(name: str, value: Any) -> None:
-    """Raise a ValueError naming the field, the value and the accepted values if ``value`` is bad."""
-    check_value(FIELD_RANGES, name, value, what="LAC")
-
-
-def parse_sets(pairs: list[str]) -> dict:
-    """``--set FIELD=VALUE`` pairs as LAC fields (values as Python literals); unknown names list the known ones."""
-    return fields.parse_sets(pairs, FIELD_NAMES, what="LAC")
+#: LAC's fields and what each accepts (the interface every algorithm's config module has:
+#: lac_rllib/algorithms/registry.py).
+FIELDS = fields.FieldSet(LACParams, "LAC")
+FIELD_RANGES, FIELD_NAMES = FIELDS.ranges, FIELDS.names
+field_docs, check_field, parse_sets = FIELDS.docs, FIELDS.check, FIELDS.parse_sets
+LACConfig.PARAMS, LACConfig.FIELDS = LACParams, FIELDS
+CONFIG_CLASS, PARAMS = LACConfig, LACParams
+#: What ``lac-eval --actions`` accepts for a LAC policy: the generator's mean, or Algorithm 1's chain.
+ACTIONS = ("generator", "langevin")
 
 #: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
 SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
