@@ -34,8 +34,10 @@ def step_cost(info: dict) -> float:
 class AddCostsFromInfos(ConnectorV2):
     """Adds the ``costs`` column: the cost of each transition (s, a, r, c, s').
 
-    It must sit right after ``AddNextObservationsFromEpisodesToTrainBatch`` in the learner
-    pipeline (see docs/dependencies.md, "The cost column": placed earlier, rows come out misaligned). Infos index like
+    It must sit right after ``AddNextObservationsFromEpisodesToTrainBatch`` in an off-policy
+    learner pipeline (see docs/dependencies.md, "The cost column": placed earlier, rows come out
+    misaligned), and right after ``AddColumnsFromEpisodesToTrainBatch`` in PPO's, which has no next
+    observations (tests/algorithms/*/ check the alignment on ``lac/CostProbe-v0``). Infos index like
     observations (index 0 is the reset info), so the cost of step t is ``infos[t + 1]``.
     """
 

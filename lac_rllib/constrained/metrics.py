@@ -44,15 +44,23 @@ LANGEVIN_AT_BOUND = "langevin_at_bound"  # fraction of end points ã_T on an act
 ACTOR_STD_MEAN = "actor_std_mean"  # mean σ of π_φ
 CHAIN_HEALTH_KEYS = (LANGEVIN_ENERGY_DROP, LANGEVIN_DISPLACEMENT, LANGEVIN_GRAD_NORM,
                      LANGEVIN_CLIP_FRACTION, LANGEVIN_AT_BOUND, ACTOR_STD_MEAN)
+# PPO-Lag (RLlib's PPO keys, then its own).
+POLICY_LOSS, VF_LOSS = "policy_loss", "vf_loss"  # RLlib's PPO: the clipped surrogate, the reward critic's MSE
+COST_VF_LOSS = "cost_vf_loss"  # masked mean (V_C − target)², last minibatch
+COST_WINDOW_MEAN = "cost_window_mean"  # Ĵ_C that ν's step used (NaN: no episode yet); SAC-Lag's too
+KL_FULL_BATCH = "kl_full_batch"  # KL(π_old ‖ π) over the batch at the last epoch check
+EPOCHS_TRAINED = "epochs_before_kl_stop"  # epochs the policy trained this iteration
+PPO_LAG_KEYS = (POLICY_LOSS, VF_LOSS, COST_VF_LOSS, COST_WINDOW_MEAN, KL_FULL_BATCH, EPOCHS_TRAINED)
 #: The learner's values of an iteration's row (those an algorithm logs; absent ones are left out).
 REPORTED_LEARNER_KEYS = (CRITIC_LOSS, ACTOR_LOSS, ACTOR_NLL, ACTOR_KL, Q_REWARD_MEAN, Q_COST_MEAN,
-                         TARGET_REWARD_MEAN, TARGET_COST_MEAN, NU_MAX, *CHAIN_HEALTH_KEYS)
+                         TARGET_REWARD_MEAN, TARGET_COST_MEAN, NU_MAX, *CHAIN_HEALTH_KEYS, *PPO_LAG_KEYS)
 #: A row's values that must be finite: a NaN here fails the trial (sweeps/trainable.py).
 MUST_BE_FINITE = (CRITIC_LOSS, ACTOR_LOSS, NU)
 
 # ----- Handed by the algorithm to every learner update, in ``timesteps`` -----
 TS_MEAN_EPISODE_COST = "safe_mean_episode_cost"  # Ĵ_C of eq. (14): the batch's completed episodes; None if none
 TS_ITERATION = "safe_training_iteration"  # the algorithm's iteration k (0-based)
+TS_EPISODE_COSTS = "safe_episode_costs"  # the baselines: the costs of the episodes completed this iteration
 
 # ----- episode.custom_data, accumulated on the env runners (they survive episode chunking) -----
 CD_EPISODE_COST, CD_EPISODE_RETURN = "safe_episode_cost", "safe_episode_return"

@@ -1,0 +1,293 @@
+"""PPOLagConfig: PPO-Lagrangian on RLlib's PPO, every field declared once with its default and source.
+
+Fields live in :class:`PPOLagParams`, one docstring each, and ``PPOLagConfig`` copies them onto
+itself. Where a field is an RLlib setting it keeps RLlib's name (``lr``, ``gamma``, ``lambda_``,
+``clip_param``, ``num_epochs``, ``minibatch_size``, ``train_batch_size_per_learner``,
+``vf_clip_param``, ``grad_clip``, ``num_envs_per_env_runner``): the field *is* that RLlib
+attribute, declared here with PPO-Lag's default, so RLlib reads it as it is and a sweep's
+``--set`` reaches it. RLlib settings PPO-Lag pins (no KL penalty, separate networks, a free log σ,
+no entropy bonus) are set in ``__init__`` and are not fields; the networks' shapes are fields of
+ours (``hidden``, ``activation``, ``log_std_init``) that reach RLlib's ``model_config``.
+
+Source tags: [O] OmniSafe PPOLag (configs/on-policy/PPOLag.yaml and the code it runs), [S]
+safety-starter-agents PPO-L (pg/run_agent.py, the paper's PPO-L, App. D), [R] RLlib's PPO,
+[D] ours. The defaults are [O]'s; the ``ssa`` preset is [S]'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
+from ray.rllib.algorithms.ppo.ppo import PPOConfig
+from ray.rllib.connectors.learner import AddColumnsFromEpisodesToTrainBatch
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.constrained import fields
+from lac_rllib.constrained.costs import AddCostsFromInfos
+from lac_rllib.constrained.fields import (
+    BOOL,
+    FINITE,
+    FRACTION,
+    INT_GE_1,
+    LAYERS,
+    NON_NEGATIVE,
+    POSITIVE,
+    Accepted,
+    one_of,
+    or_none,
+    param,
+)
+from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
+
+POLICY_LR_SCHEDULES = ("linear", "constant")
+NU_PARAMETRIZATIONS = ("direct", "softplus")
+ACTIVATIONS = ("tanh", "relu")
+PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "ssa")
+POSITIVE_OR_INF = Accepted("a number > 0 (inf: no clipping)", lambda v: isinstance(v, (int, float))
+                           and not isinstance(v, bool) and v > 0)
+
+
+@dataclasses.dataclass
+class PPOLagParams(SafeTaskParams):
+    """The PPO-Lag hyperparameters, after the fields every constrained algorithm has
+    (:class:`SafeTaskParams`: its obs filter is [O]'s, std floored at 1e-2 and clipped at ±5).
+
+    Each field: ``name: type = param(default, accepts=...)`` and, below it, its docstring.
+    """
+
+    # --- preset ---
+    preset: str | None = param(None, accepts=or_none(one_of(PRESET_NAMES)))
+    """The preset applied: the task's (``.task(id)``) or one named with ``.task(id, preset=...)`` /
+    ``training(preset=...)``, which applies its values first: "mujoco", "safety_gym" [O], "tiny" [D],
+    "ssa" [S] (see ``PRESETS``)."""
+
+    # --- Lagrange multiplier ---
+    nu_init: float = param(0.001, accepts=NON_NEGATIVE)
+    """ν₀ [O lagrangian_multiplier_init: 0.001; S penalty_init: 1]."""
+    lagrangian_lr: float = param(0.035, accepts=NON_NEGATIVE)
+    """Adam's learning rate for ν, one step per iteration before the policy update [O lambda_lr 0.035;
+    S penalty_lr 0.05]. 0 pins ν at nu_init (so nu_init=0 with 0 is unconstrained PPO)."""
+    nu_parametrization: str = param("direct", accepts=one_of(NU_PARAMETRIZATIONS))
+    """"direct": Adam on ν, then ν ← max(ν, 0) [O common/lagrange.py]; "softplus": ν = softplus(p),
+    Adam on the loss −p·(Ĵ_C − b) [S]."""
+    cost_window: int | None = param(100, accepts=or_none(INT_GE_1))
+    """Ĵ_C for ν's step: the mean cost of the last cost_window completed episodes [O window_lens 100];
+    None = of the episodes completed in this iteration only [S]. Checkpointed with ν."""
+
+    # --- advantages and critics ---
+    cost_gamma: float = param(0.99, accepts=FRACTION)
+    """γ_C of the cost GAE and the cost critic's target [O, S]; its λ is lambda_'s [O lam_c = lam; S]."""
+    gamma: float = param(0.99, accepts=FRACTION)
+    """γ of the reward GAE (RLlib's field) [O, S]."""
+    lambda_: float = param(0.95, accepts=FRACTION)
+    """λ of both GAEs (RLlib's field; its default is 1.0) [O lam, lam_c 0.95; S 0.97]."""
+    critic_lr: float = param(3e-4, accepts=POSITIVE)
+    """Adam learning rate of the reward and the cost critic, constant [O 3e-4; S vf_lr 1e-3]."""
+    critic_l2: float = param(0.001, accepts=NON_NEGATIVE)
+    """Weight of Σθ² over the critics' parameters in their loss, every minibatch [O critic_norm_coef; S: 0]."""
+    vf_clip_param: float = param(float("inf"), accepts=POSITIVE_OR_INF)
+    """RLlib's clamp of the *squared* value error (its default 10) [D: inf, no clamp, as O and S]: at 10
+    it zeroes the gradient of every value more than √10 ≈ 3.2 off, as cost values (episode costs up
+    to a limit of 25) often are."""
+
+    # --- policy ---
+    lr: float = param(3e-4, accepts=POSITIVE)
+    """Adam learning rate of the policy at the start (RLlib's field; its default is 5e-5) [O, S]."""
+    policy_lr_schedule: str = param("linear", accepts=one_of(POLICY_LR_SCHEDULES))
+    """"linear": the policy's lr decays linearly to 0 over total_env_steps [O linear_lr_decay];
+    "constant": no decay [S]. The critics' lr is constant in both [O, S]."""
+    total_env_steps: int | None = param(None, accepts=or_none(INT_GE_1))
+    """The run's budget in env steps (lac-train and the sweep set it): the linear decay's horizon."""
+    clip_param: float = param(0.2, accepts=POSITIVE)
+    """ε of PPO's clipped surrogate (RLlib's field; its default is 0.3) [O, S]."""
+    target_kl: float | None = param(0.02, accepts=or_none(POSITIVE))
+    """KL early stop [O 0.02]: after an epoch whose full-batch KL(π_old ‖ π) exceeds it, the policy
+    takes no more steps this iteration (see kl_stop_late); None = off. [S] stops when KL > 1.2·0.01
+    = 0.012, its KL the other way round, KL(π ‖ π_old) (here KL(π_old ‖ π) for both)."""
+    kl_stop_late: bool = param(False, accepts=BOOL)
+    """When the KL after an epoch exceeds target_kl: False, no further epoch trains the policy [O:
+    it measures after an epoch and breaks]; True, one more epoch still does [S: it measures before
+    a step and breaks after taking it]."""
+    kl_stop_critics: bool = param(True, accepts=BOOL)
+    """The KL stop also ends the critics' steps [O: it ends the whole update]; False: they run all
+    num_epochs [S: the value function always takes its 80 steps]."""
+    grad_clip: float | None = param(40.0, accepts=or_none(POSITIVE))
+    """Global-norm gradient clip of each network (RLlib's field, applied per optimizer: policy,
+    critic, cost critic) [O max_grad_norm 40]; None = off [S]."""
+    hidden: tuple = param((64, 64), accepts=LAYERS)
+    """Hidden layers of each of the three MLPs (policy, reward critic, cost critic) [O; S and the
+    paper's App. D: (256, 256)]."""
+    activation: str = param("tanh", accepts=one_of(ACTIVATIONS))
+    """Activation of the MLPs [O, S]."""
+    log_std_init: float = param(0.0, accepts=FINITE)
+    """Initial state-independent log σ of the Gaussian policy [O gaussian_learning; S: −0.5]."""
+
+    # --- data and schedule ---
+    train_batch_size_per_learner: int = param(20_000, accepts=INT_GE_1)
+    """Env steps sampled per iteration (RLlib's field) [O steps_per_epoch 20k; S 30k]."""
+    num_epochs: int = param(40, accepts=INT_GE_1)
+    """Passes over the iteration's batch (RLlib's field) [O update_iters 40; S train_pi_iters 80]."""
+    minibatch_size: int | None = param(64, accepts=or_none(INT_GE_1))
+    """Rows per gradient step (RLlib's field; phantom rows included, masked) [O batch_size 64];
+    None = the whole batch per step [S]."""
+    num_envs_per_env_runner: int = param(1, accepts=INT_GE_1)
+    """Envs each env runner steps together (RLlib's field) [D]: the same episodes, cheaper per step."""
+    torch_threads: int = param(1, accepts=INT_GE_1)
+    """Intra-op torch threads of the learner process [D]; a sweep sets it to the CPUs of a trial."""
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # [O]'s PPOLag defaults are the fields' defaults; 10 and 5 envs split the 20k steps into whole
+    # 1000-step episodes per env (speed only).
+    "safety_gym": {"num_envs_per_env_runner": 10},
+    "mujoco": {"num_envs_per_env_runner": 5},
+    # [D] lac/PointHazard-v0 (100-step episodes, limit 2) learns safely in 40k steps, ~30 s on one
+    # core (tests/algorithms/ppo_lag/test_ppo_lag_learning.py): 2000 steps (about 20 episodes) per
+    # iteration, 10 epochs of 8 minibatches at lr 1e-3, and a faster ν over a window of about one
+    # iteration's episodes, for a run of 20 iterations rather than hundreds.
+    "tiny": {"train_batch_size_per_learner": 2000, "num_envs_per_env_runner": 10, "minibatch_size": 250,
+             "num_epochs": 10, "lr": 1e-3, "critic_lr": 1e-3, "lagrangian_lr": 0.1, "cost_window": 20},
+    # [S] safety-starter-agents PPO-L as the paper ran it (scripts/experiment.py: 30k steps per
+    # epoch, (256, 256)); Adam on softplus⁻¹(ν) from ν₀ = 1 at lr 0.05 on this epoch's mean cost;
+    # 80 full-batch policy steps with its KL stop, 80 value steps at 1e-3; no obs normalisation,
+    # no gradient clip, no critic L2, no lr decay. Approximations: its value targets are discounted
+    # returns (here GAE-λ returns), its cost surrogate is unclipped (here clipped with the reward's),
+    # and it treats a time-limit end as terminal (here bootstrapped).
+    "ssa": {"nu_init": 1.0, "lagrangian_lr": 0.05, "nu_parametrization": "softplus", "cost_window": None,
+            "lambda_": 0.97, "critic_lr": 1e-3, "critic_l2": 0.0, "lr": 3e-4, "policy_lr_schedule": "constant",
+            "target_kl": 0.012, "kl_stop_late": True, "kl_stop_critics": False, "grad_clip": None,
+            "hidden": (256, 256), "log_std_init": -0.5, "obs_normalization": False,
+            "train_batch_size_per_learner": 30_000, "num_epochs": 80, "minibatch_size": None,
+            "num_envs_per_env_runner": 10},
+}
+
+
+class PPOLagConfig(SafeTaskConfig, PPOConfig):
+    """Config for :class:`lac_rllib.algorithms.ppo_lag.algorithm.PPOLag`; fields: :class:`PPOLagParams`.
+
+    ``PPOLagConfig().task(id)`` applies the task's preset; ``.task(id, preset="ssa")`` (or
+    ``training(preset="ssa")``) the paper's PPO-L. Explicit ``training(...)`` values win over presets.
+    """
+
+    PRESETS = PRESETS
+
+    def __init__(self, algo_class=None):
+        from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
+
+        super().__init__(algo_class=algo_class or PPOLag)
+        for f in dataclasses.fields(PPOLagParams):
+            setattr(self, f.name, f.default)
+        # RLlib settings PPO-Lag pins.
+        self.use_kl_loss = False  # no adaptive KL penalty; the early stop bounds the step [O, S]
+        self.entropy_coeff = 0.0  # [O entropy_coef, S ent_reg]
+        self.vf_loss_coeff = 1.0  # plain MSE for both critics [O, S]
+        self.grad_clip_by = "global_norm"  # [O clip_grad_norm_]
+        self.shuffle_batch_per_epoch = True  # [O DataLoader(shuffle=True)]
+        self.rollout_fragment_length = "auto"
+
+    def task(self, task_id: str, *, preset: str | None = None) -> "PPOLagConfig":
+        super().task(task_id, preset=preset)
+        self.preset = preset or self.task_spec.preset
+        return self
+
+    @override(PPOConfig)
+    def training(self, **kwargs) -> "PPOLagConfig":
+        """RLlib's settings and PPO-Lag's fields; ``preset=NAME`` applies that preset first (the other
+        values of the same call win; None leaves the values as they are)."""
+        preset = kwargs.pop("preset", None)
+        if preset is not None and preset is not NotProvided:
+            if preset not in PRESETS:
+                raise ValueError(f"unknown preset {preset!r}; accepted: {', '.join(PRESETS)}")
+            kwargs = {**PRESETS[preset], **kwargs}
+            self.preset = preset
+        own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELDS.names}
+        super().training(**kwargs)
+        for name, value in own.items():
+            if value is NotProvided:
+                continue
+            if name == "hidden" and isinstance(value, list):
+                value = tuple(value)
+            FIELDS.check(name, value)
+            setattr(self, name, value)
+        return self
+
+    def policy_lr_or_schedule(self):
+        """The policy's lr as RLlib's ``lr_or_lr_schedule``: [[0, lr], [total_env_steps, 0]] in env steps
+        (RLlib's Scheduler is stepped after each update with the lifetime env steps), or the constant."""
+        if self.policy_lr_schedule == "constant":
+            return self.lr
+        return [[0, self.lr], [self.total_env_steps, 0.0]]
+
+    # ----- RLlib hooks -----
+    @override(PPOConfig)
+    def validate(self) -> None:
+        super().validate()
+        for f in dataclasses.fields(PPOLagParams):
+            FIELDS.check(f.name, getattr(self, f.name))
+        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
+        if self.policy_lr_schedule == "linear" and self.total_env_steps is None:
+            raise ValueError("PPO-Lag config field total_env_steps=None is invalid with policy_lr_schedule='linear' "
+                             "(the decay needs a horizon); accepted: an integer >= 1, or policy_lr_schedule='constant'")
+
+    @override(AlgorithmConfig)
+    def build_learner_connector(self, input_observation_space, input_action_space, device=None):
+        """RLlib's learner pipeline plus the cost of each row (PPOLearner.build then prepends the
+        phantom step and appends the GAEs, learner.py)."""
+        pipeline = super().build_learner_connector(
+            input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
+        pipeline.insert_after(AddColumnsFromEpisodesToTrainBatch, AddCostsFromInfos())
+        return pipeline
+
+    @override(PPOConfig)
+    def get_default_rl_module_spec(self) -> RLModuleSpec:
+        from lac_rllib.algorithms.ppo_lag.module import PPOLagTorchRLModule
+
+        return RLModuleSpec(module_class=PPOLagTorchRLModule)
+
+    @override(PPOConfig)
+    def get_default_learner_class(self):
+        from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
+
+        return PPOLagTorchLearner
+
+    @property
+    @override(PPOConfig)
+    def _model_config_auto_includes(self) -> dict[str, Any]:
+        return {**super()._model_config_auto_includes,
+                "fcnet_hiddens": list(self.hidden), "fcnet_activation": self.activation, "head_fcnet_hiddens": [],
+                "vf_share_layers": False, "free_log_std": True, "log_std_init": self.log_std_init,
+                "nu_init": self.nu_init, "normalize_actions": self.normalize_actions}
+
+
+#: PPO-Lag's fields and what each accepts (lac_rllib/algorithms/registry.py).
+FIELDS = fields.FieldSet(PPOLagParams, "PPO-Lag")
+PPOLagConfig.PARAMS, PPOLagConfig.FIELDS = PPOLagParams, FIELDS
+CONFIG_CLASS, PARAMS = PPOLagConfig, PPOLagParams
+#: What ``lac-eval --actions`` accepts for a PPO-Lag policy: its mean action.
+ACTIONS = ("generator",)
+#: Fields that set how fast a run goes, not what it learns.
+SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads"})
+
+
+def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
+                 timesteps: int | None = None, cpus: int = 1) -> PPOLagConfig:
+    """The PPOLagConfig a run of ``timesteps`` env steps uses (validated; no Ray needed): the task's
+    preset (or ``sets["preset"]``), then ``sets``. The budget is the policy lr's decay horizon.
+    ``cpus`` > 1 samples with that many env runners and updates with that many threads (LAC's use_cpus)."""
+    from lac_rllib.constrained.cpus import use_cpus
+
+    if timesteps is not None:
+        sets = {"total_env_steps": int(timesteps), **sets}
+    sets = dict(sets)
+    config = PPOLagConfig().task(task, preset=sets.pop("preset", None)).training(**sets).debugging(seed=seed)
+    config.env_runners(num_env_runners=num_env_runners)
+    if cpus != 1:
+        if num_env_runners:
+            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
+                             "accepted: one of the two")
+        use_cpus(config, cpus)
+    config.validate()
+    return config

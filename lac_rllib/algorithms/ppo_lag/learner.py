@@ -1,0 +1,236 @@
+"""PPOLagTorchLearner: RLlib's PPO loss on the Lagrangian advantage, the cost critic, ν's step and
+the KL early stop. Source tags: [O] OmniSafe PPOLag, [S] safety-starter-agents PPO-L, [R] RLlib.
+
+One ``learner_group.update`` call is one iteration (what OmniSafe calls an epoch; an *epoch* below is
+one pass over the iteration's batch):
+
+1. before the gradient steps, ν takes one step on Ĵ_C, the mean cost of the last ``cost_window``
+   completed episodes (this iteration's included) [O PPOLag._update: λ first, then the policy];
+2. the learner connector adds the cost GAE (cost_gae.py);
+3. each minibatch: PPO's clipped surrogate [R] on the advantage [O PPOLag._compute_adv_surrogate]
+
+       A = (A^R − ν·A^C) / (1 + ν)
+
+   plus the reward critic's MSE [R] and the cost critic's MSE (no clipping: ``vf_clip_param=inf``),
+   plus critic_l2·Σθ² over both critics [O use_critic_norm]; one optimizer per network, each with
+   its own gradient-norm clip (RLlib's ``grad_clip`` is per optimizer) [O max_grad_norm];
+4. the KL early stop [O]: after each epoch, KL(π_old ‖ π) over the whole batch; once it exceeds
+   ``target_kl``, the remaining minibatches no longer step the policy (nor the critics, when
+   ``kl_stop_critics``; then their backward pass is skipped too), or, with ``kl_stop_late`` [S],
+   those after one more epoch. The check runs before the first
+   minibatch that starts past an epoch's last row: RLlib's MiniBatchCyclicIterator fills every
+   minibatch, so one that straddles an epoch's end trains before the check (OmniSafe's last
+   minibatch of an epoch is short instead).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+import torch
+from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
+from ray.rllib.core.columns import Columns
+from ray.rllib.evaluation.postprocessing import Postprocessing
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
+from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier
+from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, declared with every other)
+    COST_VF_LOSS,
+    COST_WINDOW_MEAN,
+    EPOCHS_TRAINED,
+    KL_FULL_BATCH,
+    NU,
+    TS_EPISODE_COSTS,
+)
+
+POLICY, CRITIC, COST_CRITIC = "policy", "critic", "cost_critic"  # optimizer names, one per network
+NETWORKS = (POLICY, CRITIC, COST_CRITIC)
+#: The learner's own entry in its checkpointed state (RLlib's keeps the module, optimizers, metrics).
+STATE_KEY = "ppo_lag"
+
+
+def softplus(x: float) -> float:
+    return max(x, 0.0) + math.log1p(math.exp(-abs(x)))
+
+
+class SoftplusAdamStep:
+    """[S] run_agent.py: ν = softplus(p), p₀ = softplus⁻¹(ν₀), Adam on the loss −p·(Ĵ_C − b) (the loss
+    is on p itself: PPO-L sets ``penalty_param_loss``). ν ≥ 0 by construction."""
+
+    def __init__(self, lr: float, nu_init: float):
+        self.adam = AdamStep(lr)
+        self.p = math.log(max(math.expm1(nu_init), 1e-8))
+
+    def step(self, nu: float, episode_cost: float, cost_limit: float) -> float:
+        self.p = self.adam.step(self.p, episode_cost, cost_limit)
+        return softplus(self.p)
+
+    def get_state(self) -> dict:
+        return {"p": self.p, "adam": self.adam.get_state()}
+
+    def set_state(self, state: dict) -> None:
+        self.p = float(state["p"])
+        self.adam.set_state(state["adam"])
+
+
+@dataclasses.dataclass
+class EpochProgress:
+    """One update's progress through its epochs, for the KL early stop."""
+
+    rows: int = 0  # rows of the minibatches trained on so far
+    epoch: int = 0  # the epoch the current minibatch starts in (0-based)
+    checked: int = 0  # epochs whose end was checked
+    stopped_after: int | None = None  # the policy trains epochs [0, stopped_after) only
+    kl: float = float("nan")  # KL at the last check
+
+
+class PPOLagTorchLearner(PPOTorchLearner):
+    @override(PPOTorchLearner)
+    def build(self) -> None:
+        torch.set_num_threads(self.config.torch_threads)
+        super().build()  # PPOLearner.build appends RLlib's GAE to the learner connector
+        self.cost_gae = CostGAE(gamma=self.config.cost_gamma, lambda_=self.config.lambda_)
+        if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
+            self._learner_connector.append(self.cost_gae)  # after RLlib's GAE: it needs the complete batch
+        self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
+        self.cost_windows = {mid: collections.deque(maxlen=self.config.get_config_for_module(mid).cost_window)
+                             for mid in self.module.keys()}
+        self.progress: dict[str, EpochProgress] = {}
+
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
+        """ν of ``module``: Adam on ν itself [O common/lagrange.py] or on softplus⁻¹(ν) [S]; unbounded."""
+        config = self.config.get_config_for_module(module_id)
+        rule = (AdamStep(config.lagrangian_lr) if config.nu_parametrization == "direct"
+                else SoftplusAdamStep(config.lagrangian_lr, config.nu_init))
+        return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit, rule=rule,
+                                  bounded=False)
+
+    @override(PPOTorchLearner)
+    def configure_optimizers_for_module(self, module_id, config=None) -> None:
+        module = self.module[module_id].unwrapped()
+        networks = {
+            POLICY: ([module.encoder.actor_encoder, module.pi], config.policy_lr_or_schedule()),
+            CRITIC: ([module.encoder.critic_encoder, module.vf], config.critic_lr),
+            COST_CRITIC: ([module.cost_vf], config.critic_lr),
+        }
+        for name, (parts, lr) in networks.items():
+            params = [p for part in parts for p in self.get_parameters(part)]
+            self.register_optimizer(module_id=module_id, optimizer_name=name, optimizer=torch.optim.Adam(params),
+                                    params=params, lr_or_lr_schedule=lr)
+
+    # ----- ν, once per iteration before the gradient steps -----
+    @override(PPOTorchLearner)
+    def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
+        super().before_gradient_based_update(timesteps=timesteps)
+        costs = list(timesteps.get(TS_EPISODE_COSTS) or [])
+        for mid, multiplier in self.multipliers.items():
+            window = self.cost_windows[mid]
+            if window.maxlen is None:  # cost_window None: this iteration's episodes only [S]
+                window.clear()
+            window.extend(costs)
+            j_c = float(np.mean(window)) if window else None  # no episode completed yet: no step
+            multiplier.step(j_c)
+            self.metrics.log_dict({NU: multiplier.value, COST_WINDOW_MEAN: float("nan") if j_c is None else j_c},
+                                  key=mid, window=1)
+            self.progress[mid] = EpochProgress()
+
+    # ----- losses -----
+    @override(PPOTorchLearner)
+    def compute_loss_for_module(self, *, module_id, config, batch, fwd_out) -> torch.Tensor:
+        module = self.module[module_id].unwrapped()
+        self.check_kl_at_epoch_end(module_id, config, module, minibatch_rows=len(batch[Columns.LOSS_MASK]))
+        nu = module.nu.detach()
+        advantages = (batch[Postprocessing.ADVANTAGES] - nu * batch[COST_ADVANTAGES]) / (1.0 + nu)
+        loss = super().compute_loss_for_module(module_id=module_id, config=config, fwd_out=fwd_out,
+                                               batch={**batch, Postprocessing.ADVANTAGES: advantages})
+        mask = batch[Columns.LOSS_MASK]
+        cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[mask].mean()
+        loss = loss + config.vf_loss_coeff * cost_vf_loss
+        if config.critic_l2:
+            critics = (module.encoder.critic_encoder, module.vf, module.cost_vf)
+            loss = loss + config.critic_l2 * sum((p**2).sum() for net in critics for p in net.parameters())
+        self.metrics.log_value((module_id, COST_VF_LOSS), cost_vf_loss.detach(), window=1)
+        return loss
+
+    # ----- the KL early stop -----
+    def check_kl_at_epoch_end(self, module_id, config, module, *, minibatch_rows: int) -> None:
+        """Before a minibatch's step: if an epoch ended since the last check, measure KL(π_old ‖ π)
+        on the whole batch [O] and stop the policy's steps if it exceeds ``target_kl``."""
+        progress = self.progress.setdefault(module_id, EpochProgress())
+        whole = self.cost_gae.last_batch.get(module_id)
+        if whole is not None:
+            progress.epoch = progress.rows // len(whole[Columns.LOSS_MASK])
+            if config.target_kl is not None and progress.stopped_after is None and progress.epoch > progress.checked:
+                progress.checked, progress.kl = progress.epoch, full_batch_kl(module, whole)
+                if progress.kl > config.target_kl:
+                    # [O] breaks before the next epoch; [S] checks before a step and still takes it.
+                    progress.stopped_after = progress.epoch + int(config.kl_stop_late)
+        progress.rows += minibatch_rows
+
+    def stopped_optimizers(self, module_id) -> tuple[str, ...]:
+        progress = self.progress.get(module_id)
+        if progress is None or progress.stopped_after is None or progress.epoch < progress.stopped_after:
+            return ()
+        return NETWORKS if self.config.get_config_for_module(module_id).kl_stop_critics else (POLICY,)
+
+    @override(PPOTorchLearner)
+    def compute_gradients(self, loss_per_module, **kwargs):
+        if all(self.stopped_optimizers(mid) == NETWORKS for mid in self.module.keys()):
+            # Every network has stopped for this iteration: skip the backward pass.
+            for mid in self.module.keys():
+                for _, optim in self.get_optimizers_for_module(mid):
+                    optim.zero_grad(set_to_none=True)
+            return {}
+        return super().compute_gradients(loss_per_module, **kwargs)
+
+    @override(PPOTorchLearner)
+    def apply_gradients(self, gradients_dict) -> None:
+        grads = dict(gradients_dict)
+        for mid in self.module.keys():
+            for name in self.stopped_optimizers(mid):
+                optim = self.get_optimizer(mid, name)
+                for pid in self.filter_param_dict_for_optimizer(grads, optim):
+                    del grads[pid]
+                # Adam skips a parameter whose .grad is None: no step and no moment update.
+                optim.zero_grad(set_to_none=True)
+        super().apply_gradients(grads)
+
+    @override(PPOTorchLearner)
+    def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
+        super().after_gradient_based_update(timesteps=timesteps)  # steps the lr schedules
+        for mid, progress in self.progress.items():
+            epochs = self.config.get_config_for_module(mid).num_epochs
+            epochs = epochs if progress.stopped_after is None else min(progress.stopped_after, epochs)
+            self.metrics.log_dict({EPOCHS_TRAINED: epochs, KL_FULL_BATCH: progress.kl}, key=mid, window=1)
+
+    # ----- state: ν rides in the module; each multiplier's rule and the cost windows here -----
+    @override(PPOTorchLearner)
+    def get_state(self, *args, **kwargs):
+        state = super().get_state(*args, **kwargs)
+        state[STATE_KEY] = {mid: {"lagrange": m.get_state(), "cost_window": list(self.cost_windows[mid])}
+                            for mid, m in self.multipliers.items()}
+        return state
+
+    @override(PPOTorchLearner)
+    def set_state(self, state) -> None:
+        super().set_state(state)
+        for mid, module in self.module.items():  # the module's ν buffer stays the multiplier's value
+            self.multipliers[mid].bind(module.unwrapped().nu)
+        for mid, saved in state.get(STATE_KEY, {}).items():
+            self.multipliers[mid].set_state(saved["lagrange"])
+            self.cost_windows[mid].clear()
+            self.cost_windows[mid].extend(saved["cost_window"])
+
+
+@torch.no_grad()
+def full_batch_kl(module, columns: dict) -> float:
+    """Mean KL(π_old ‖ π) over the real rows of a whole batch (π_old: the behaviour policy's inputs)."""
+    dist = module.get_train_action_dist_cls()
+    old = dist.from_logits(columns[Columns.ACTION_DIST_INPUTS])
+    new = dist.from_logits(module.action_dist_inputs(columns[Columns.OBS]))
+    return float(old.kl(new)[columns[Columns.LOSS_MASK]].mean())
