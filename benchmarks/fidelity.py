@@ -1,5 +1,5 @@
-"""Learning curves of LAC against the paper's numbers: the check for any change that can alter
-what the agent learns (defaults, numerics, sampling).
+"""Learning curves of LAC (and of the baselines: ``algo=``) against the paper's numbers: the check
+for any change that can alter what the agent learns (defaults, numerics, sampling).
 
     python benchmarks/fidelity.py --task SafetyPointGoal1-v0 --seeds 2 --timesteps 500000 \\
         --variant new --variant "old:langevin_grad_clip=None,nu_max_adaptive=False" \\
@@ -7,7 +7,8 @@ what the agent learns (defaults, numerics, sampling).
 
 Each (variant, seed) is one ``lac-train`` run (a subprocess, niced, one torch thread), at most
 ``--parallel`` at a time (default: the CPUs). A variant is ``NAME`` or ``NAME:field=value,...``
-on top of the defaults and ``--set``. Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
+on top of the defaults and ``--set`` (``algo=ppo_lag`` or ``algo=sac_lag`` among them trains that
+baseline). Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
 one line per iteration and a checkpoint every ``--checkpoint-every`` iterations, and the report is rebuilt every
 ``--report-every`` seconds while runs go, so a run stopped mid-way (session end, Ctrl-C) leaves
 curves up to its last iteration; ``--resume`` continues such runs from their checkpoints (the same
@@ -59,15 +60,27 @@ TAIL = 0.10  # the final 10% of the env steps
 RAY_STARTUP_S = 120  # a run is niced this long after its start (its Ray is up by then)
 
 
-def parse_variant(text: str) -> tuple[str, list[str]]:
-    """``"old:a=1,b=None"`` → ("old", ["a=1", "b=None"]); the sets are checked by lac-train's parser."""
-    from lac_rllib.algorithms.lac.config import parse_sets
+def split_algo(pairs: list[str]) -> tuple[str, list[str]]:
+    """``["algo=sac_lag", "alpha=0.1"]`` → ("sac_lag", ["alpha=0.1"]): a variant's algorithm (LAC
+    unless it names one) and its fields."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, check_algo
+
+    algos = [p.partition("=")[2].strip() for p in pairs if p.partition("=")[0].strip() == ALGO_FIELD]
+    rest = [p for p in pairs if p.partition("=")[0].strip() != ALGO_FIELD]
+    return check_algo(algos[-1] if algos else DEFAULT_ALGO), rest
+
+
+def parse_variant(text: str, common: list[str] = ()) -> tuple[str, list[str]]:
+    """``"old:a=1,b=None"`` → ("old", ["a=1", "b=None"]); ``algo=ppo_lag`` among them trains that
+    baseline. The sets (and the ``--set`` ones, ``common``) are checked by lac-train's parser."""
+    from lac_rllib.algorithms.registry import parse_sets
 
     name, _, sets = text.partition(":")
     pairs = [p.strip() for p in sets.split(",") if p.strip()]
     if not name or "/" in name:
         raise ValueError(f"--variant {text!r}: expected NAME or NAME:field=value,...")
-    parse_sets(pairs)  # unknown fields fail here, before anything runs
+    algo, fields = split_algo([*common, *pairs])
+    parse_sets(algo, fields)  # unknown fields fail here, before anything runs
     return name, pairs
 
 
@@ -81,8 +94,11 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
 
     d = run_dir(out, variant, seed)
     d.mkdir(parents=True, exist_ok=True)
+    algo, pairs = split_algo(pairs)
     cmd = [sys.executable, "-m", "lac_rllib.train", "--task", task, "--seed", str(seed),
            "--timesteps", str(timesteps), "--output", str(d), "--checkpoint-every", str(checkpoint_every)]
+    if algo != "lac":
+        cmd += ["--algo", algo]
     if resume and resumable_checkpoint(str(d)):
         cmd.append("--resume")  # lac-train checks that the settings are the run's
     else:
@@ -213,7 +229,7 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
     reached = df.groupby(["variant", "seed"]).agg(steps=("env_steps", "max"), hours=("time_s", "max"))
     budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
                        for (v, s), r in reached.iterrows())
-    text = (f"# {task}: LAC learning curves\n\n"
+    text = (f"# {task}: learning curves\n\n"
             f"Budget per run: {f'{timesteps:,} env steps' if timesteps else 'see the commands'}; reached:\n{budget}\n\n"
             f"{table}\n\n![curves](curves.png)\n\nCommands:\n\n```\n" + "\n".join(commands) + "\n```\n")
     (out / "table.md").write_text(text)
@@ -245,12 +261,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     try:
-        from lac_rllib.algorithms.lac.config import parse_sets
         from lac_rllib.tasks import get_task
 
         get_task(args.task)
-        parse_sets(args.set)
-        variants = [parse_variant(v) for v in args.variant or ["defaults"]]
+        variants = [parse_variant(v, args.set) for v in args.variant or ["defaults"]]
         if len({v for v, _ in variants}) != len(variants):
             raise ValueError("--variant names must be distinct")
         seeds = [int(s) for s in args.seed_list.split(",")] if args.seed_list else list(range(args.seeds))

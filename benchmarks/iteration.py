@@ -27,6 +27,10 @@ Configurations, each built fresh on the same task, seed and buffer contents:
 Prints a table with each phase's ratio baseline / current and writes it to ``--out``, then the
 float32 matmul floor of the current iteration's chains, timed in the same run, and the ratio an
 iteration would reach with the chain exactly at that floor (the ceiling of float32 on this CPU).
+
+``--cpus 2`` times the current configuration's whole iteration on one CPU and on two
+(``lac-train --cpus 2``: two env runners sample, two torch threads update; lac_rllib.algorithms.lac.config.use_cpus),
+same buffer, same run, and prints the ratio (issue 24's goal: >= 1.6x).
 """
 
 from __future__ import annotations
@@ -173,6 +177,35 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
             "chain floor": floor, "chains": len(calls)}
 
 
+def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> float:
+    """Mean wall seconds of ``iterations`` whole ``algo.train()`` calls (after one untimed, which
+    pays the compile and the runners' start) of the current defaults on ``cpus`` CPUs, the buffer
+    prefilled as in :func:`time_iteration`."""
+    from lac_rllib.algorithms.lac.config import build_config
+
+    episodes, runner_state, capacity, per_iteration = prefill
+    config = build_config(task, seed, {"random_iterations": 0, "actor_update_start_iteration": 0},
+                          timesteps=10**9, cpus=cpus)
+    algo = config.build_algo()
+    try:
+        filter_state = {k: v for k, v in runner_state.items() if "connector" in k}
+        algo.env_runner_group.foreach_env_runner(lambda r: r.set_state(filter_state), local_env_runner=True)
+        rows = 0
+        while rows < capacity - per_iteration:
+            for e in episodes:
+                dup = copy.deepcopy(e)
+                dup.id_ = uuid.uuid4().hex
+                algo.replay_buffer.add([dup])
+                rows += len(dup)
+        algo.train()  # untimed: the compile, the runners' first sample
+        t0 = time.perf_counter()
+        for _ in range(iterations):
+            algo.train()
+        return (time.perf_counter() - t0) / iterations
+    finally:
+        algo.stop()
+
+
 def table(task: str, results: dict[str, dict[str, float]]) -> str:
     names = list(results)
     lines = [f"### {task}", "", "| phase | " + " | ".join(f"{n} (s)" for n in names) + " | baseline / current |",
@@ -199,6 +232,8 @@ def main(argv=None) -> int:
     parser.add_argument("--variant", action="append", default=[], metavar="NAME:F=V,...",
                         help="another configuration to time (lac-train --set syntax)")
     parser.add_argument("--out", default=None, help="also write the tables (markdown) here")
+    parser.add_argument("--cpus", type=int, default=None, metavar="N",
+                        help="instead of the phases: whole iterations on 1 CPU against N CPUs, and their ratio")
     args = parser.parse_args(argv)
     from lac_rllib.algorithms.lac.config import parse_sets
     from lac_rllib.tasks import get_task
@@ -219,9 +254,22 @@ def main(argv=None) -> int:
     from lac_rllib.tasks.versions import runtime_versions
 
     torch.set_num_threads(1)
-    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
-    out = [f"One LAC iteration per configuration, one CPU. {runtime_versions()}, "
+    ray.init(num_cpus=args.cpus or 1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    what = f"on 1 and {args.cpus} CPUs" if args.cpus else "one CPU"
+    out = [f"One LAC iteration per configuration, {what}. {runtime_versions()}, "
            f"torch {torch.__version__}, CPU capability {torch.backends.cpu.get_cpu_capability()}.", ""]
+    if args.cpus:
+        for task in args.tasks:
+            prefill = prefill_episodes(task, args.seed)
+            one, many = (time_cpus(task, n, args.seed, prefill) for n in (1, args.cpus))
+            text = (f"### {task}\n\nWhole iteration, the defaults: {one:.1f} s on 1 CPU, {many:.1f} s on "
+                    f"{args.cpus} CPUs: {one / many:.2f}x.")
+            print(text + "\n", flush=True)
+            out += [text, ""]
+        if args.out:
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.out).write_text("\n".join(out))
+        return 0
     for task in args.tasks:
         prefill = prefill_episodes(task, args.seed)
         results = {}

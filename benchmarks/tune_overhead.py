@@ -43,7 +43,7 @@ def main() -> None:
 
     start = time.perf_counter()
     for t in plan.trials:  # with the LAC fields the plan resolved for it, as its sweep trial runs
-        config = build_config(t.task, t.seed, t.lac_params, timesteps=plan.timesteps)
+        config = build_config(t.task, t.seed, t.params, timesteps=plan.timesteps)
         train(config, plan.timesteps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
     direct = time.perf_counter() - start
 

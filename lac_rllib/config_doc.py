@@ -1,7 +1,7 @@
-"""docs/config.md, generated from ``lac_rllib/algorithms/lac/config.py`` so it cannot drift from the code.
+"""docs/config.md, generated from every algorithm's ``config.py`` so it cannot drift from the code.
 
 Regenerate with ``python -m lac_rllib.config_doc > docs/config.md`` (tests/test_docs.py checks it).
-Fields are grouped by the ``# --- group ---`` comments of :class:`LACParams`, in source order.
+Fields are grouped by the ``# --- group ---`` comments of each params class, in source order.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import inspect
 import re
 import sys
 
-from lac_rllib.algorithms.lac.config import FIELD_RANGES, PRESETS, LACParams, field_docs
+from lac_rllib.algorithms.lac.config import LACParams
 from lac_rllib.tasks import get_task, known_tasks
 
 REGENERATE = "python -m lac_rllib.config_doc > docs/config.md"
@@ -46,39 +46,62 @@ def field_groups(params_cls=LACParams) -> list[tuple[str, list[str]]]:
     return groups
 
 
-def config_markdown() -> str:
-    """The text of docs/config.md."""
-    docs = field_docs()
-    defaults = {f.name: f.default for f in dataclasses.fields(LACParams)}
-    out = [
-        "# LAC configuration fields",
-        "",
-        f"*Generated from `lac_rllib/algorithms/lac/config.py`: do not edit; regenerate with `{REGENERATE}`.*",
-        "",
-        "Every field of `LACParams`, with its default, the values it accepts and its docstring. Set a field with",
-        "`LACConfig().training(name=value)`, `lac-train --set name=value` or the sweep's `--set name=value`.",
-        "Source tags: [P] paper, [C] authors' code, [F] FOCOPS, [D] our decision; the formulas and the",
-        "reasons are in [spec.md](spec.md).",
-    ]
-    for title, names in field_groups():
-        out += ["", f"## {title[:1].upper()}{title[1:]}", "", "| field | default | accepted | meaning |",
-                "|---|---|---|---|"]
-        out += [f"| `{n}` | {_code(defaults[n])} | {_cell(FIELD_RANGES[n].text)} | {_cell(docs.get(n, ''))} |"
-                for n in names]
+def _algo_section(algo: str, first: bool) -> list[str]:
+    """One algorithm's fields (grouped) and its presets. The fields every constrained algorithm has
+    (``SafeTaskParams``) are listed with the first algorithm only."""
+    from lac_rllib.algorithms.registry import algo_config
+    from lac_rllib.constrained.task_config import SafeTaskParams
 
-    touched = [n for n in defaults if any(n in p for p in PRESETS.values())]
+    mod = algo_config(algo)
+    params, fields, presets = mod.PARAMS, mod.FIELDS, mod.PRESETS
+    docs, defaults, cls = fields.docs(), fields.defaults, mod.CONFIG_CLASS.__name__
+    shared = {f.name for f in dataclasses.fields(SafeTaskParams)}
+    out = ["", f"## {fields.what} (`algo={algo}`)", "",
+           f"`{params.__name__}` in `{mod.__name__.replace('.', '/')}.py`. Set a field with "
+           f"`{cls}().training(name=value)`, `lac-train --algo {algo} --set name=value` or the sweep's "
+           f"`--set name=value`" + (f" (with `--set algo={algo}` or `--space compare`)." if algo != "lac" else ".")]
+    if not first:
+        out += ["Its task and observation-filter fields are those of every algorithm (first section)."]
+    for title, names in field_groups(params):
+        names = [n for n in names if first or n not in shared]
+        if not names:
+            continue
+        out += ["", f"### {title[:1].upper()}{title[1:]}", "", "| field | default | accepted | meaning |",
+                "|---|---|---|---|"]
+        out += [f"| `{n}` | {_code(defaults[n])} | {_cell(fields.ranges[n].text)} | {_cell(docs.get(n, ''))} |"
+                for n in names]
+    touched = [n for n in defaults if any(n in p for p in presets.values())]
     out += [
-        "", "## Presets", "",
-        "`LACConfig().task(id)` applies the task's preset (`PRESETS` in `lac_rllib/algorithms/lac/config.py`),",
-        "then the task's own overrides (next table); explicit `training(...)` values win over both. An empty",
-        "cell keeps the default.",
+        "", f"### {fields.what} presets", "",
+        f"`{cls}().task(id)` applies the task's preset (`PRESETS` in `{mod.__name__.replace('.', '/')}.py`)"
+        + (", then the task's own overrides (Tasks, below)" if algo == "lac" else "")
+        + "; explicit `training(...)` values win. An empty cell keeps the default.",
         "",
-        "| field | default | " + " | ".join(f"`{p}`" for p in PRESETS) + " |",
-        "|---|---|" + "---|" * len(PRESETS),
+        "| field | default | " + " | ".join(f"`{p}`" for p in presets) + " |",
+        "|---|---|" + "---|" * len(presets),
     ]
     for n in touched:
-        cells = [_code(p[n]) if n in p else "" for p in PRESETS.values()]
+        cells = [_code(p[n]) if n in p else "" for p in presets.values()]
         out.append(f"| `{n}` | {_code(defaults[n])} | " + " | ".join(cells) + " |")
+    return out
+
+
+def config_markdown() -> str:
+    """The text of docs/config.md."""
+    from lac_rllib.algorithms.registry import ALGOS
+
+    out = [
+        "# Configuration fields of every algorithm",
+        "",
+        f"*Generated from each algorithm's `config.py`: do not edit; regenerate with `{REGENERATE}`.*",
+        "",
+        "Every field of LAC and of the baselines (`algo`: " + " | ".join(f"`{a}`" for a in ALGOS) + "), with its",
+        "default, the values it accepts and its docstring. Source tags: [P] paper, [C] authors' code, [F] FOCOPS",
+        "(for SAC-Lag: FSRL), [O] OmniSafe, [S] safety-starter-agents, [R] RLlib, [D] our decision; LAC's formulas",
+        "and reasons are in [spec.md](spec.md), the baselines' in [baselines.md](baselines.md).",
+    ]
+    for i, algo in enumerate(ALGOS):
+        out += _algo_section(algo, first=i == 0)
 
     out += ["", "## Tasks", "",
             "The registered tasks (`lac_rllib/tasks/`; spec.md §6): the preset each applies, its own overrides,",

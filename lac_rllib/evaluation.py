@@ -68,12 +68,24 @@ class Policy:
     env_to_module: Any            # EnvToModulePipeline (its MeanStdFilter frozen)
     obs_filter: Any               # the frozen MeanStdFilter, or None (obs_normalization off)
     task_id: str
-    lac_config: dict              # LACParams fields as saved
+    lac_config: dict              # the algorithm's fields as saved (LACParams for LAC)
     cost_limit: float             # b in force for the run
     episode_cost_discount: float  # 1.0 = summed episode cost, < 1 = discounted
     env_config: dict
     checkpoint_path: str
     metadata: dict                # the whole rllib_checkpoint.json
+
+    @property
+    def algo(self) -> str:
+        """The algorithm that wrote the checkpoint (lac_rllib/algorithms/registry.py)."""
+        return str(self.metadata.get("algo") or "lac")
+
+    @property
+    def actions(self) -> tuple[str, ...]:
+        """The action modes this policy can act with (the algorithm's ``ACTIONS``)."""
+        from lac_rllib.algorithms.registry import algo_config
+
+        return tuple(algo_config(self.algo).ACTIONS)
 
     @property
     def action_low(self) -> np.ndarray:
@@ -403,14 +415,18 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
 
     if actions not in ACTION_MODES:
         raise ValueError(f"actions={actions!r} is invalid; accepted: {' | '.join(ACTION_MODES)}")
+    if actions not in policy.actions:  # the chain needs LAC's critics and ν
+        raise ValueError(f"actions={actions!r} is LAC's; this checkpoint is {policy.algo}'s; accepted: "
+                         f"{' | '.join(policy.actions)}")
     if not (isinstance(episodes, int) and episodes >= 1):
         raise ValueError(f"episodes={episodes!r} is invalid; accepted: an integer >= 1")
     if langevin_steps is not None and not (isinstance(langevin_steps, int) and langevin_steps >= 1):
         raise ValueError(f"langevin_steps={langevin_steps!r} is invalid; accepted: an integer >= 1")
     if langevin_step_size is not None and not (math.isfinite(langevin_step_size) and langevin_step_size > 0):
         raise ValueError(f"langevin_step_size={langevin_step_size!r} is invalid; accepted: a number > 0")
-    steps = langevin_steps or int(policy.lac_config["langevin_steps"])
-    step_size = langevin_step_size or float(policy.lac_config["langevin_step_size"])
+    if actions == "langevin":
+        steps = langevin_steps or int(policy.lac_config["langevin_steps"])
+        step_size = langevin_step_size or float(policy.lac_config["langevin_step_size"])
 
     module, gamma_c = policy.module, policy.episode_cost_discount
     low, high = policy.action_low, policy.action_high
@@ -445,7 +461,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
                 s = batch[Columns.OBS]
                 with torch.no_grad():
                     if actions == "generator":
-                        action = module.actor(s)[0]
+                        action = module.deterministic_action(s)
                     else:
                         t_mean, t_log_std = module.target_actor(s)
                         chain = module.langevin(s, t_mean, t_log_std, steps=steps,
@@ -478,7 +494,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
     ret_mean, ret_std = _stats(returns)
     cost_mean, cost_std = _stats(costs)
     result = {
-        "checkpoint": policy.checkpoint_path, "task": policy.task_id, "actions": actions,
+        "checkpoint": policy.checkpoint_path, "task": policy.task_id, "algo": policy.algo, "actions": actions,
         "episodes": episodes, "seed": seed,
         "returns": returns, "costs": costs, "lengths": lengths,
         "return_mean": ret_mean, "return_std": ret_std, "cost_mean": cost_mean, "cost_std": cost_std,

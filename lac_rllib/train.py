@@ -1,4 +1,5 @@
-"""Single-run trainer: ``python -m lac_rllib.train --task ID --timesteps N --seed S --output DIR``.
+"""Single-run trainer: ``python -m lac_rllib.train --task ID --timesteps N --seed S --output DIR``
+(``--algo ppo_lag|sac_lag`` trains a baseline instead of LAC).
 
 Prints one progress line per iteration and, as the last line of stdout, one JSON object with
 the final metrics and the checkpoint path. Every argument is checked before Ray starts.
@@ -16,15 +17,8 @@ import shutil
 import sys
 import time
 
-from lac_rllib.algorithms.lac.config import (
-    FIELD_NAMES,
-    FIELD_RANGES,
-    SPEED_FIELDS,
-    LACConfig,
-    build_config,
-    field_docs,
-    parse_sets,
-)
+from lac_rllib.algorithms import registry
+from lac_rllib.algorithms.lac.config import FIELD_NAMES, FIELD_RANGES, field_docs
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
     ENV_STEPS,
@@ -45,9 +39,10 @@ def _fmt(x) -> str:
 CHECKPOINT, PROGRESS, CONFIG = "checkpoint", "progress.jsonl", "config.json"
 
 
-def run_config(config: LACConfig) -> dict:
+def run_config(config) -> dict:
     """What ``config.json`` in a run's output holds (and what ``--resume`` compares)."""
-    return json.loads(json.dumps({"task": config.task_id, "seed": config.seed, **config.lac_params()}, default=str))
+    return json.loads(json.dumps({"task": config.task_id, "seed": config.seed,
+                                  registry.ALGO_FIELD: config.algo_class.ALGO, **config.params()}, default=str))
 
 
 def resumable_checkpoint(output: str) -> str | None:
@@ -62,13 +57,13 @@ def resumable_checkpoint(output: str) -> str | None:
 
 def _lr_horizon(params: dict):
     """The lr decay's horizon a run's config.json implies (None: no decay)."""
-    if params.get("lr_schedule") == "constant":
-        return None
+    if params.get("lr_schedule", params.get("policy_lr_schedule")) in ("constant", None):
+        return None  # no decay (SAC-Lag has no schedule)
     horizon = params.get("lr_decay_horizon")
     return horizon if horizon is not None else params.get("total_env_steps")
 
 
-def check_output(output: str, config: LACConfig, resume: bool) -> None:
+def check_output(output: str, config, resume: bool) -> None:
     """A writable directory that holds no other run (checked before Ray starts)."""
     try:
         os.makedirs(output, exist_ok=True)
@@ -86,9 +81,10 @@ def check_output(output: str, config: LACConfig, resume: bool) -> None:
     if resumable_checkpoint(output) is None or not os.path.exists(os.path.join(output, CONFIG)):
         raise ValueError(f"--resume: no checkpoint in {output} to continue from")
     with open(os.path.join(output, CONFIG)) as f:
-        old = json.load(f)
+        old = {registry.ALGO_FIELD: registry.DEFAULT_ALGO, **json.load(f)}  # runs before 0.2 name no algo: LAC
     new = run_config(config)
-    diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in SPEED_FIELDS)
+    speed = registry.algo_config(new[registry.ALGO_FIELD]).SPEED_FIELDS
+    diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in speed)
     if "total_env_steps" in diff and _lr_horizon(old) == _lr_horizon(new):
         # The budget shapes training only through the lr decay's horizon: with lr_decay_horizon
         # set (the Safety-Gym and MuJoCo presets) a run may be carried on to a larger budget.
@@ -114,7 +110,7 @@ def _save(algo, output: str) -> str:
     return final
 
 
-def train(config: LACConfig, timesteps: int, output: str, *, log=print, checkpoint_every: int = 0,
+def train(config, timesteps: int, output: str, *, log=print, checkpoint_every: int = 0,
           resume: bool = False) -> dict:
     """Train until ``timesteps`` env steps, checkpoint into ``output``, return the summary.
 
@@ -193,13 +189,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="lac-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="LAC fields for --set:\n" + "\n".join(
-            f"  {k}: {docs.get(k, '')} Accepted: {FIELD_RANGES[k].text}." for k in sorted(FIELD_NAMES)),
+            f"  {k}: {docs.get(k, '')} Accepted: {FIELD_RANGES[k].text}." for k in sorted(FIELD_NAMES))
+        + "\n\nThe baselines' fields (--algo ppo_lag | sac_lag): docs/config.md.",
     )
+    parser.add_argument("--algo", default=registry.DEFAULT_ALGO, choices=list(registry.ALGOS),
+                        help="the algorithm: LAC or a baseline (default lac)")
     parser.add_argument("--task", default="lac/PointHazard-v0", help=f"one of: {', '.join(known_tasks())}")
     parser.add_argument("--timesteps", type=int, required=True, help="env steps to train for (>= 1)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", required=True, help="directory for the checkpoint and logs")
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a LAC config field")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="override a field of the algorithm's config")
     parser.add_argument("--num-env-runners", type=int, default=0, help="remote env runners (0 = sample in the driver)")
     parser.add_argument("--cpus", type=int, default=1,
                         help="CPUs of the run: as many env runners sample and as many torch threads update, the same "
@@ -216,8 +216,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--checkpoint-every {args.checkpoint_every} is invalid; accepted: an integer >= 0")
         if args.num_env_runners < 0:
             raise ValueError(f"--num-env-runners {args.num_env_runners} is invalid; accepted: an integer >= 0")
-        config = build_config(args.task, args.seed, parse_sets(args.set), args.num_env_runners, args.timesteps,
-                              cpus=args.cpus)
+        config = registry.build_config(args.algo, args.task, args.seed, registry.parse_sets(args.algo, args.set),
+                                       args.num_env_runners, args.timesteps, cpus=args.cpus)
         check_output(args.output, config, args.resume)
     except ValueError as e:
         parser.exit(2, f"lac-train: error: {e}\n")

@@ -237,7 +237,7 @@ def format_human(result: dict, source: str) -> str:
     convention = "summed" if gamma == 1.0 else f"discounted with {gamma:g}"
     lines = [
         f"{source}",
-        f"task {result['task']}  actions {result['actions']}  episodes {n}  "
+        f"task {result['task']}  algo {result.get('algo', 'lac')}  actions {result['actions']}  episodes {n}  "
         f"seeds {result['seed']}..{result['seed'] + n - 1}",
         f"return         {_pm(result['return_mean'], result['return_std'])}",
         f"cost           {_pm(result['cost_mean'], result['cost_std'])}  ({convention} per episode)",
@@ -278,6 +278,9 @@ def main(argv: list[str] | None = None) -> int:
         try:
             resolved = resolve_checkpoint(args, workdir)
             policy = restore_policy(resolved.checkpoint)
+            if args.actions not in policy.actions:  # the chain needs LAC's critics and ν
+                raise UsageError(f"--actions {args.actions} is LAC's; {resolved.checkpoint} is a {policy.algo} "
+                                 f"checkpoint; accepted: --actions {' | '.join(policy.actions)}")
         except (UsageError, CheckpointError) as e:
             parser.exit(2, f"{PROG}: error: {e}\n")
         if resolved.task_param and resolved.task_param != policy.task_id:

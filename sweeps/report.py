@@ -175,10 +175,43 @@ def markdown_table(summary: pd.DataFrame) -> str:
                 _pm(r["return_mean"], r["return_std"]), _pm(r["cost_mean"], r["cost_std"]), _fmt_num(r["cost_limit"])]
         lines.append("| " + " | ".join(cell(c) for c in cols) + " |")
     best = best_configuration(summary)
-    lines += ["", seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
+    comparison = algorithm_comparison(summary)
+    lines += ["", seeds_line([int(n) for n in summary["n_seeds"] if n]), ""] + ([comparison] if comparison else [])
     lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
                  "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)")
     return "\n".join(lines) + "\n"
+
+
+def algorithm_comparison(summary: pd.DataFrame) -> str:
+    """The algorithms of a compare sweep side by side, per task (``""`` when the sweep compares none):
+    return and cost (mean and IQM with their intervals), feasible seeds, P(LAC beats X) on return
+    and on cost (LAC runs the defaults, the comparisons' reference: P(LAC beats X) = 1 − P(X beats
+    LAC), ties counting one half), and which algorithm is best within the limit."""
+    rows = summary[summary["param"].astype(str) == "algo"]
+    if rows.empty or rows["value"].nunique() < 2:
+        return ""
+    out = []
+    for task, g in rows.groupby("task", sort=False):
+        lines = [f"**Algorithms on `{task}`** (final return and cost over seeds; limit "
+                 f"{_fmt_num(g['cost_limit'].median())}):", "",
+                 "| algorithm | seeds | return mean [95% CI] | return IQM [95% CI] | cost mean [95% CI] | "
+                 "cost IQM [95% CI] | feasible seeds | P(LAC return > X) | P(LAC cost < X) |",
+                 "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in g.to_dict("records"):
+            lac = r["value"] == "lac"
+            beats = ["–", "–"] if lac else [_poi(1 - r[k]) if not _is_na(r[k]) else "–"
+                                            for k in ("poi_return_vs_default", "poi_cost_vs_default")]
+            lines.append("| " + " | ".join([str(r["value"]), _seeds(r), *_stat_cells(r)[:5], *beats]) + " |")
+        ok = g[g["mean_feasible"].astype(bool) & g["return_mean"].notna()]
+        if ok.empty:
+            lines += ["", "**Best within the limit:** none (no algorithm's mean cost is within the limit)"]
+        else:
+            best = ok.loc[ok["return_mean"].idxmax()]
+            lines += ["", f"**Best within the limit:** {best['value']}, return "
+                          f"{_ci(best['return_mean'], best['return_mean_ci_low'], best['return_mean_ci_high'])}, "
+                          f"cost {_ci(best['cost_mean'], best['cost_mean_ci_low'], best['cost_mean_ci_high'])}"]
+        out.append("\n".join(lines))
+    return "\n\n".join(out) + "\n"
 
 
 def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: int = 7900) -> str:

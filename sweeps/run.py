@@ -27,6 +27,8 @@ from sweeps.tracking import check_reachable, default_tracking_uri
 RATE = {"tiny": 405.0, "safety_gym": 377.0, "mujoco": 185.0}
 CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
 STARTUP_S = 15.0
+# A baseline's update seconds per env step (SAC-Lag: per update per env step) at the tiny sizes.
+UPDATE_S_PER_STEP = {"ppo_lag": 2e-4, "sac_lag": 2e-3}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -57,7 +59,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="Optuna storage URL of the search space's study (default: optuna.db beside a local MLflow "
                         "store, else in --storage); open it with optuna-dashboard URL")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                   help="set a LAC field in every trial (the swept value wins); e.g. nu_max_adaptive=False")
+                   help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
+                        "algo=ppo_lag|sac_lag runs a baseline (fields: docs/config.md)")
     return p.parse_args(argv)
 
 
@@ -115,11 +118,7 @@ def make_plan(args) -> Plan:
         v = getattr(args, flag)
         if v is not None and v < 1:
             raise ValueError(f"--{flag.replace('_', '-')} {v} is invalid; accepted: an integer >= 1")
-    from lac_rllib.algorithms.lac.config import check_field, parse_sets
-
-    sets = parse_sets(args.set)  # unknown fields list the accepted ones
-    for field, value in sets.items():
-        check_field(field, value)
+    sets = parse_trial_sets(args.space, args.set)
     if not args.address and args.cpus_per_trial > (os.cpu_count() or 1):
         # Tune would keep such a trial PENDING forever on the local Ray this command starts.
         raise ValueError(f"--cpus-per-trial {args.cpus_per_trial} is more than this machine's "
@@ -136,15 +135,15 @@ def make_plan(args) -> Plan:
     # budget < --set < swept value); a search sample is resolved in its trial the same way.
     trials = (spaces.resolve_trials(spaces.grid(args.space, task, args.seeds, args.budget), args.budget, sets)
               if args.space != "search" else None)
-    from lac_rllib.algorithms.lac.config import check_cpus
+    from lac_rllib.constrained.cpus import check_cpus
 
-    for params in [t.lac_params for t in trials] if trials else [spaces.trial_params(task, args.budget, sets)]:
-        check_cpus(params["num_envs_per_env_runner"], args.cpus_per_trial, "--cpus-per-trial")
+    for params in [t.params for t in trials] if trials else [spaces.trial_params(task, args.budget, sets)]:
+        check_cpus(params.get("num_envs_per_env_runner", 1), args.cpus_per_trial, "--cpus-per-trial")
     # search: each Optuna sample is trained with every seed (sweeps/sweep.py, SeedRepeater)
     n_trials = len(trials) if trials is not None else args.num_samples * args.seeds
     concurrency = min(args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial), n_trials)
     # A search is estimated at the fields it runs before Optuna's samples (the sampled T is not known yet).
-    per_trial = ([estimate_trial_s(t.task, budget.for_task(t.task)[0], t.lac_params, args.cpus_per_trial)
+    per_trial = ([estimate_trial_s(t.task, budget.for_task(t.task)[0], t.params, args.cpus_per_trial)
                   for t in trials] if trials else
                  [estimate_trial_s(task, budget.for_task(task)[0], spaces.trial_params(task, args.budget, sets),
                                    args.cpus_per_trial)] * n_trials)
@@ -160,6 +159,31 @@ def make_plan(args) -> Plan:
         estimated_cpu_h=sum(per_trial) * args.cpus_per_trial / 3600, tracking_uri=uri, experiment=args.experiment,
         name=name, storage=str(Path(args.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
     )
+
+
+def parse_trial_sets(space: str, pairs: list[str]) -> dict:
+    """``--set FIELD=VALUE`` as the fields every trial sets, checked against each algorithm the
+    sweep runs (``--set algo=NAME`` picks one; the compare space runs them all)."""
+    from lac_rllib.algorithms import registry
+
+    algo_pairs = [p for p in pairs if p.partition("=")[0].strip() == registry.ALGO_FIELD]
+    field_pairs = [p for p in pairs if p not in algo_pairs]
+    sets = {}
+    if algo_pairs:
+        if space == "compare":
+            raise ValueError(f"--set {algo_pairs[-1]} with --space compare: the space runs every algorithm "
+                             f"({', '.join(spaces.COMPARE_ALGOS)}); accepted: --set of fields they share")
+        sets[registry.ALGO_FIELD] = registry.check_algo(algo_pairs[-1].partition("=")[2].strip())
+    algos = spaces.COMPARE_ALGOS if space == "compare" else (sets.get(registry.ALGO_FIELD, registry.DEFAULT_ALGO),)
+    if space in ("search", "ablation", "smoke") and algos != ("lac",):
+        raise ValueError(f"--space {space} sweeps LAC's own fields (T, eta, lambda, beta); --set algo={algos[0]} is "
+                         "not LAC; accepted for a baseline: --space paper or --space compare")
+    for algo in algos:
+        fields = registry.parse_sets(algo, field_pairs)  # a field another algorithm owns is named as such
+        for name, value in fields.items():
+            registry.algo_config(algo).FIELDS.check(name, value)
+        sets.update(fields)
+    return sets
 
 
 def default_optuna_storage(tracking_uri: str, storage: str) -> str:
@@ -192,15 +216,20 @@ def check_optuna_study(url: str, name: str, resume: bool) -> None:
                          f"delete it (optuna delete-study --storage {url} --study-name {name})")
 
 
-def estimate_trial_s(task: str, steps: int, lac_params: dict, cpus: int) -> float:
-    """Rough wall seconds of one trial of ``steps`` env steps whose LAC fields are ``lac_params``
-    (``spaces.trial_params``): start-up, then env steps at the preset's measured rate, plus the
-    chain's share, which grows with T (measured on this project's 2-core machine)."""
+def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
+    """Rough wall seconds of one trial of ``steps`` env steps whose fields are ``params``
+    (``spaces.trial_params``): start-up, then env steps at the preset's measured rate, plus LAC's
+    chain share, which grows with T, or a baseline's update share (measured on this project's
+    2-core machine)."""
     from lac_rllib.tasks import get_task
 
     preset = get_task(task).preset
-    chain = CHAIN_S_PER_STEP.get(preset, 0.0) * lac_params["langevin_steps"] * steps
-    return STARTUP_S + (steps / RATE[preset] + chain) / cpus ** 0.5
+    algo = params.get("algo", "lac")
+    if algo == "lac":
+        extra = CHAIN_S_PER_STEP.get(preset, 0.0) * params["langevin_steps"] * steps
+    else:
+        extra = UPDATE_S_PER_STEP[algo] * params.get("updates_per_env_step", 1.0) * steps
+    return STARTUP_S + (steps / RATE[preset] + extra) / cpus ** 0.5
 
 
 def estimate_wall_s(per_trial: list[float], concurrency: int) -> float:

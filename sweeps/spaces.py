@@ -1,7 +1,8 @@
 """Named search spaces and budgets, declared in one place and validated.
 
 A space expands to a list of :class:`TrialSpec` (grid spaces) or, for ``search``, to a Tune
-search space that Optuna samples. Each trial is one LAC run: a task, a seed and LAC overrides.
+search space that Optuna samples. Each trial is one run of one algorithm (``algo``: LAC or a
+baseline, lac_rllib/algorithms/registry.py): a task, a seed and the algorithm's field overrides.
 """
 
 from __future__ import annotations
@@ -14,12 +15,14 @@ PAPER_TASKS = (
     "focops/AntVelocity-v0", "focops/SwimmerVelocity-v0", "focops/HumanoidVelocity-v0",
     "focops/HumanoidCircle-v0",
 )
-SPACES = ("ablation", "search", "paper", "smoke")
+SPACES = ("ablation", "search", "paper", "smoke", "compare")
 REPEAT_INDEX = "__trial_index__"  # ray.tune.search.repeater.TRIAL_INDEX (not imported: no Ray before the plan)
 DEFAULT_TASK = "lac/PointHazard-v0"  # the default ablation: a task that learns in minutes
 PAPER_ABLATION_TASK = "SafetyPointGoal1-v0"  # the paper's Table 3 (--task ... --budget paper)
 QUICK_TINY_STEPS = 40_000
 SMOKE_TASK = "lac/PointHazard-v0"
+#: The compare space: every algorithm at one budget (LAC first: the others are compared with it).
+COMPARE_ALGOS = ("lac", "ppo_lag", "sac_lag")
 
 # Table 3: NI × T, VT × T, PR × β (the paper's ablations, each × seeds).
 ABLATION = {
@@ -42,20 +45,27 @@ QUICK_ABLATION = {
 @dataclasses.dataclass(frozen=True)
 class Budget:
     """Env steps per trial and the LAC overrides that make that budget meaningful, per task preset
-    (``lac_rllib.algorithms.lac.config.PRESETS``; ``"*"`` for any other preset)."""
+    (``lac_rllib.algorithms.lac.config.PRESETS``; ``"*"`` for any other preset). Every algorithm
+    gets the same env steps; a baseline gets its own overrides (``by_algo``: algo → preset → fields)."""
 
     by_preset: dict
     doc: str
     #: The ablation's groups at this budget, per preset, where they differ from Table 3's ``ABLATION``.
     ablation_by_preset: dict = dataclasses.field(default_factory=dict)
+    #: A baseline's overrides at this budget, per preset ("*": any other); none: its preset's values.
+    by_algo: dict = dataclasses.field(default_factory=dict)
 
-    def for_preset(self, preset: str) -> tuple[int, dict]:
-        return self.by_preset.get(preset, self.by_preset["*"])
+    def for_preset(self, preset: str, algo: str = "lac") -> tuple[int, dict]:
+        steps, lac_overrides = self.by_preset.get(preset, self.by_preset["*"])
+        if algo == "lac":
+            return steps, lac_overrides
+        own = self.by_algo.get(algo, {})
+        return steps, own.get(preset, own.get("*", {}))
 
-    def for_task(self, task: str) -> tuple[int, dict]:
+    def for_task(self, task: str, algo: str = "lac") -> tuple[int, dict]:
         from lac_rllib.tasks import get_task
 
-        return self.for_preset(get_task(task).preset)
+        return self.for_preset(get_task(task).preset, algo)
 
     def describe(self) -> str:
         steps = ", ".join(f"{n:,}" + ("" if p == "*" else f" on {p} tasks") for p, (n, _) in self.by_preset.items())
@@ -65,8 +75,25 @@ class Budget:
 # A trial this short cannot repay a compile of the fused chain (~15-40 s per process): eager.
 _SMOKE = {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
           "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1, "langevin_fused": False}
+# The baselines at the smoke budget (same sizes) and at the quick budget on the paper's tasks (64-wide
+# nets, one env, 2k-step iterations as LAC's); on the tiny task their own tiny presets are the quick budget.
+_SMOKE_BY_ALGO = {
+    "ppo_lag": {"*": {"train_batch_size_per_learner": 500, "minibatch_size": 100, "num_epochs": 2, "hidden": (32, 32),
+                      "num_envs_per_env_runner": 1}},
+    "sac_lag": {"*": {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_env_steps": 500,
+                      "warmup_env_steps": 500, "actor_hidden": (32, 32), "critic_hidden": (32, 32),
+                      "num_envs_per_env_runner": 1}},
+}
+_QUICK_BY_ALGO = {
+    "ppo_lag": {"tiny": {}, "*": {"train_batch_size_per_learner": 2_000, "hidden": (64, 64),
+                                  "num_envs_per_env_runner": 1}},
+    "sac_lag": {"tiny": {}, "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000,
+                                  "random_env_steps": 2_000, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                                  "num_envs_per_env_runner": 1}},
+}
 BUDGETS: dict[str, Budget] = {
-    "smoke": Budget({"*": (2_000, _SMOKE)}, "seconds per trial: proves the machinery, learns nothing"),
+    "smoke": Budget({"*": (2_000, _SMOKE)}, "seconds per trial: proves the machinery, learns nothing",
+                    by_algo=_SMOKE_BY_ALGO),
     # The default ablation (python sweeps/run.py --space ablation): on the tiny task, where
     # QUICK_TINY_STEPS of the tiny preset learn, on a reduced Table 3 grid (QUICK_ABLATION);
     # calibrated by running it (docs/sweeps.md). The fused chain pays here: a T = 30 trial runs
@@ -82,7 +109,7 @@ BUDGETS: dict[str, Budget] = {
                                     "num_envs_per_env_runner": 1, "langevin_fused": False})},
                     "the default ablation learns lac/PointHazard-v0 in ~30 min on 2 cores; on the paper's tasks "
                     "a machinery check that learns nothing",
-                    ablation_by_preset={"tiny": QUICK_ABLATION}),
+                    ablation_by_preset={"tiny": QUICK_ABLATION}, by_algo=_QUICK_BY_ALGO),
     "paper": Budget({"*": (2_500_000, {})}, "the paper's 2.5M env steps with the docs/spec.md §5 presets"),
 }
 
@@ -111,17 +138,25 @@ class TrialSpec:
     default: bool = False
     #: A search trial's values as Optuna sampled them (its name); None for grid trials.
     sampled: dict | None = None
-    #: Every LAC field's value in this trial, as :func:`trial_params` resolves it (at plan time for a
-    #: grid trial, in the trial for a search sample); what the estimate, the trainable and the
-    #: default flag read. None until resolved.
-    lac_params: dict | None = None
+    #: ``algo`` and every field of that algorithm in this trial, as :func:`trial_params` resolves
+    #: them (at plan time for a grid trial, in the trial for a search sample); what the estimate,
+    #: the trainable and the default flag read. None until resolved.
+    params: dict | None = None
+
+    @property
+    def algo(self) -> str:
+        """The trial's algorithm (lac_rllib/algorithms/registry.py)."""
+        from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO
+
+        return (self.params or self.overrides).get(ALGO_FIELD, DEFAULT_ALGO)
 
     def config_label(self) -> str:
-        """The configuration without its seed (MLflow's ``lac.config`` tag)."""
+        """The configuration without its seed (MLflow's ``lac.config`` tag); it names a baseline."""
         if self.sampled is not None:
             return search_label(self.sampled, None)
         task = self.task.split("/")[-1]
-        return f"{self.group}-{self.param}={self.value}-{task}" if self.param else f"{self.group}-{task}"
+        label = f"{self.group}-{self.param}={self.value}-{task}" if self.param else f"{self.group}-{task}"
+        return label if self.algo == "lac" or self.param == "algo" else f"{self.algo}-{label}"
 
     def label(self) -> str:
         return f"{self.config_label()}-s{self.seed}"
@@ -133,10 +168,16 @@ def config_id(task: str, timesteps: int, params: dict) -> str:
     import hashlib
     import json
 
-    from lac_rllib.algorithms.lac.config import SPEED_FIELDS
-
-    what = {"task": task, "timesteps": int(timesteps), **{k: v for k, v in params.items() if k not in SPEED_FIELDS}}
+    speed = speed_fields(params)
+    what = {"task": task, "timesteps": int(timesteps), **{k: v for k, v in params.items() if k not in speed}}
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+def speed_fields(params: dict) -> frozenset:
+    """The speed-only fields of the algorithm ``params`` names (``algo``; LAC without one)."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, algo_config
+
+    return algo_config(params.get(ALGO_FIELD, DEFAULT_ALGO)).SPEED_FIELDS
 
 
 # Short names of the searched fields in a search trial's label (ASCII: labels name Tune's trials).
@@ -167,7 +208,7 @@ def trial_spec(config: dict) -> TrialSpec:
     sampled = dict(config["overrides"])
     params = trial_params(task, budget, sets, sampled)
     return TrialSpec("search", "", None, task, int(config.get(REPEAT_INDEX, 0)), sampled, sampled=sampled,
-                     lac_params=params, default=params == trial_params(task, budget, sets))
+                     params=params, default=params == trial_params(task, budget, sets))
 
 
 def validate(space: str, task: str | None, budget: str, seeds: int) -> None:
@@ -195,6 +236,9 @@ def grid(space: str, task: str | None, seeds: int, budget: str = "paper") -> lis
     from lac_rllib.tasks import get_task
 
     task = default_task(space, task)
+    if space == "compare":  # algo × seeds: every algorithm at the same budget, LAC first
+        return [TrialSpec("compare", "algo", algo, task, seed, {"algo": algo})
+                for algo in COMPARE_ALGOS for seed in range(seeds)]
     if space == "paper":
         tasks = (task,) if task else PAPER_TASKS
         return [TrialSpec("paper", "", None, t, s, {}) for t in tasks for s in range(seeds)]
@@ -211,15 +255,19 @@ def grid(space: str, task: str | None, seeds: int, budget: str = "paper") -> lis
 
 
 def trial_params(task: str, budget: str, sets: dict, overrides: dict | None = None) -> dict[str, Any]:
-    """Every LAC field's value in a trial of ``task`` at ``budget``: the one place the precedence is
-    written. The task's preset < the task's own overrides (``TaskSpec.overrides``, e.g. T = 50 on the
-    Button tasks) < the budget's overrides < the user's ``--set`` < the trial's own ``overrides``
-    (the swept or sampled value). ``build_config`` applies the first two (``LACConfig.task``); the
-    horizon of the learning-rate decay is the budget's env steps unless an override names another."""
-    from lac_rllib.algorithms.lac.config import build_config
+    """``algo`` and every field of that algorithm in a trial of ``task`` at ``budget``: the one place
+    the precedence is written. The algorithm is the trial's ``algo`` override, else ``--set algo=``,
+    else LAC. Then the algorithm's preset for the task < the task's own overrides (LAC only:
+    ``TaskSpec.overrides``, e.g. T = 50 on the Button tasks) < the budget's overrides for that
+    algorithm < the user's ``--set`` < the trial's own ``overrides`` (the swept or sampled value).
+    ``build_config`` applies the first two (``SafeTaskConfig.task``); the horizon of the
+    learning-rate decay is the budget's env steps unless an override names another."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD, build_config, split_algo
 
-    steps, budget_overrides = BUDGETS[budget].for_task(task)
-    return build_config(task, 0, {**budget_overrides, **sets, **(overrides or {})}, timesteps=steps).lac_params()
+    algo, fields = split_algo({**sets, **(overrides or {})})
+    steps, budget_overrides = BUDGETS[budget].for_task(task, algo)
+    config = build_config(algo, task, 0, {**budget_overrides, **fields}, timesteps=steps)
+    return {ALGO_FIELD: algo, **config.params()}
 
 
 def resolve_trials(trials: list[TrialSpec], budget: str, sets: dict) -> list[TrialSpec]:
@@ -231,7 +279,7 @@ def resolve_trials(trials: list[TrialSpec], budget: str, sets: dict) -> list[Tri
         if t.task not in base:
             base[t.task] = trial_params(t.task, budget, sets)
         params = trial_params(t.task, budget, sets, t.overrides)
-        out.append(dataclasses.replace(t, lac_params=params, default=params == base[t.task]))
+        out.append(dataclasses.replace(t, params=params, default=params == base[t.task]))
     return out
 
 

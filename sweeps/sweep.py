@@ -18,7 +18,7 @@ from ray.tune.schedulers import ASHAScheduler
 from ray.tune.search import Repeater
 from ray.tune.search.optuna import OptunaSearch
 
-from lac_rllib.algorithms.lac.config import run_resources
+from lac_rllib.constrained.cpus import run_resources
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE
 from sweeps import spaces
 from sweeps.live_table import LiveTable
@@ -28,6 +28,7 @@ from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
     DEFAULT_TAG,
+    P_ALGO,
     P_GROUP,
     P_SEED,
     P_SWEPT_PARAM,
@@ -235,19 +236,28 @@ def close_open_children(tracker: SweepTracker, parent: str, status: str, tags: d
     return n
 
 
+def param_value(text: str):
+    """A logged param as its value: JSON for numbers and None, the text itself for a string
+    (sweeps.tracking logs strings as they are, e.g. a swept ``algo``)."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
 def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str) -> None:
     """Summary table, best configuration and plots on the parent run, read back from MLflow
     (the record of every trial, resumed ones included); the summary is the parent run's note."""
     import pandas as pd
 
-    from sweeps.report import note_markdown, summarize, write_sweep_reports
+    from sweeps.report import algorithm_comparison, note_markdown, summarize, write_sweep_reports
 
     rows, curves = [], {}
     for run in tracker.children(parent):
         p, m, tid = run.data.params, run.data.metrics, run.data.tags.get("lac.trial_id", run.info.run_id)
-        value = json.loads(p.get(P_SWEPT_VALUE, "null"))
+        value = param_value(p.get(P_SWEPT_VALUE, "null"))
         rows.append({"trial_id": tid, "group": p.get(P_GROUP, ""), "param": p.get(P_SWEPT_PARAM, ""), "value": value,
-                     "task": p.get(P_TASK), "seed": int(p.get(P_SEED, 0)),
+                     "task": p.get(P_TASK), "seed": int(p.get(P_SEED, 0)), "algo": p.get(P_ALGO, "lac"),
                      "config": run.data.tags.get(CONFIG_TAG, ""), "config_id": run.data.tags.get(CONFIG_ID_TAG, ""),
                      "default": run.data.tags.get(DEFAULT_TAG) == "1",
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
@@ -264,7 +274,13 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str)
     footer = ("Files: `summary/summary.md` (every column), `summary/aggregates.png` (these statistics), "
               "`summary/cost_boxplots.png`, `summary/learning_curves.png`; one child run per trial (group them "
               "by the tag `lac.config` in the runs table to see one averaged curve per configuration).")
-    tracker.set_note(parent, note_markdown(summarize(trials), heading, footer) if len(trials) else heading)
+    if len(trials):
+        summary = summarize(trials)
+        note = note_markdown(summary, heading, footer)
+        comparison = algorithm_comparison(summary)
+        if comparison:  # the algorithms side by side lead the note (MLflow cuts a tag at 8000 characters)
+            note = note.replace(heading, heading + "\n\n" + comparison, 1)[:7990]
+    tracker.set_note(parent, note if len(trials) else heading)
     tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
     tracker.client.set_tag(parent, STATUS_TAG, "finished")
     tracker.client.set_terminated(parent, status="FINISHED")

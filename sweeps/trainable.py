@@ -1,4 +1,5 @@
-"""LACTrainable: one sweep trial = one LAC run inside a Tune trial, tracked in its MLflow child run.
+"""LACTrainable: one sweep trial = one run of LAC or a baseline inside a Tune trial, tracked in its
+MLflow child run.
 
 Tune owns scheduling, checkpoints (``save_checkpoint`` writes the RLlib checkpoint), restore and
 failure handling; this class only adapts LAC to it and reports. A trial that raises or produces
@@ -18,7 +19,7 @@ import ray
 from ray import tune
 from ray.tune.result import TIME_TOTAL_S
 
-from lac_rllib.algorithms.lac.config import build_config
+from lac_rllib.algorithms.registry import build_config, split_algo
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
     ENV_STEPS,
@@ -31,12 +32,14 @@ from lac_rllib.constrained.metrics import (
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import (
+    ALGO_TAG,
     CHECKPOINT_TAG,
     CONFIG_ID_TAG,
     CONFIG_TAG,
     DEFAULT_TAG,
     ERROR_TAG,
     NODE_TAG,
+    P_ALGO,
     P_GROUP,
     P_SEED,
     P_SWEPT_PARAM,
@@ -69,21 +72,23 @@ class LACTrainable(tune.Trainable):
     def setup(self, config: dict) -> None:
         self.spec = spec = spaces.trial_spec(config)
         self.timesteps = int(config["timesteps"])
-        # The trial's fields as resolved (spaces.trial_params), run on its CPUs (env runners and
-        # torch threads: lac_rllib.algorithms.lac.config.use_cpus).
+        # The trial's algorithm and fields as resolved (spaces.trial_params), run on its CPUs (env
+        # runners and torch threads: lac_rllib.algorithms.lac.config.use_cpus).
         cpus = int(config.get("cpus", 1))  # a trial's torch threads are its CPUs, whatever --set says
-        overrides = {**spec.lac_params, "torch_threads": cpus}
-        self.lac_config = build_config(spec.task, spec.seed, overrides, timesteps=self.timesteps, cpus=cpus)
+        algo, fields = split_algo(spec.params)
+        self.lac_config = build_config(algo, spec.task, spec.seed, {**fields, "torch_threads": cpus},
+                                       timesteps=self.timesteps, cpus=cpus)
         self.algo = self.lac_config.build_algo()
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
                                     spec.label())
         params = {P_TASK: spec.task, P_SEED: spec.seed, P_GROUP: spec.group, P_SWEPT_PARAM: spec.param,
-                  P_SWEPT_VALUE: spec.value, P_TIMESTEPS: self.timesteps, **self.lac_config.lac_params()}
+                  P_SWEPT_VALUE: spec.value, P_TIMESTEPS: self.timesteps, P_ALGO: algo, **self.lac_config.params()}
         tags = {NODE_TAG: ray.get_runtime_context().get_node_id(), "lac.host": socket.gethostname(),
                 "lac.tune_trial_name": self.trial_name, "lac.group": spec.group,
                 # MLflow's UI groups runs by a tag and averages their curves: one group per configuration.
-                CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, self.lac_config.lac_params()),
+                CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, {P_ALGO: algo, **self.lac_config.params()}),
+                ALGO_TAG: algo,
                 CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if spec.default else "0"}
         self.tracker.open(params, tags)
         prev = self.tracker.previous

@@ -70,9 +70,11 @@ class OffPolicySafeAlgorithm(SafeAlgorithm):
         self.replay_buffer.add(episodes)
         return returns, costs
 
-    def update_from_replay(self, *, minibatch_size: int, num_minibatches: int, timesteps: dict) -> None:
+    def update_from_replay(self, *, minibatch_size: int, num_minibatches: int, timesteps: dict,
+                           **update_kwargs) -> None:
         """One ``learner_group.update`` of ``num_minibatches`` minibatches over the whole buffer
-        (the learner connector shuffles its rows), then the new weights to the env runners."""
+        (the learner connector shuffles its rows), then the new weights to the env runners.
+        ``update_kwargs`` go to ``learner_group.update`` (e.g. ``num_epochs``, ``shuffle_batch_per_epoch``)."""
         learner_results = self.learner_group.update(
             # Shallow copies: the learner connector renames episode ids in place
             # (AddObservationsFromEpisodesToBatch appends "_i"), which would break the
@@ -81,6 +83,7 @@ class OffPolicySafeAlgorithm(SafeAlgorithm):
             timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: self.lifetime_env_steps, **timesteps},
             minibatch_size=minibatch_size,
             num_total_minibatches=num_minibatches,
+            **update_kwargs,
         )
         self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
         self.env_runner_group.sync_weights(from_worker_or_learner_group=self.learner_group, inference_only=True)

@@ -56,12 +56,12 @@ def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypat
     args = ("--space", "paper", "--task", "SafetyPointButton1-v0", "--budget", "paper", "--seeds", "1")
     plan = _plan(tmp_path, monkeypatch, *args)
     (trial,) = plan.trials
-    assert trial.lac_params["langevin_steps"] == 50
+    assert trial.params["langevin_steps"] == 50
     assert plan.estimated_wall_s == pytest.approx(formula(50))
     assert formula(50) > 1.3 * formula(30)  # T = 30 would count ~2 hours less
     assert plan.estimated_cpu_h == pytest.approx(formula(50) / 3600)
     plan = _plan(tmp_path, monkeypatch, *args, "--set", "langevin_steps=70")
-    assert plan.trials[0].lac_params["langevin_steps"] == 70
+    assert plan.trials[0].params["langevin_steps"] == 70
     assert plan.estimated_wall_s == pytest.approx(formula(70))
     # A search is estimated at the fields its trials start from: the task's own T as well.
     plan = _plan(tmp_path, monkeypatch, "--space", "search", "--task", "SafetyPointButton1-v0", "--budget", "paper",
@@ -76,7 +76,7 @@ def test_trial_fields_are_resolved_once_in_order(tmp_path, monkeypatch):
     from sweeps import spaces
 
     plan = _plan(tmp_path, monkeypatch, "--space", "ablation", "--set", "langevin_steps=15", "--set", "beta=2.0")
-    by_label = {t.label(): t.lac_params for t in plan.trials}
+    by_label = {t.label(): t.params for t in plan.trials}
     assert PRESETS["tiny"]["langevin_steps"] == 10  # the preset ...
     budget = spaces.BUDGETS["quick"].for_preset("tiny")[1]
     assert budget["langevin_steps"] == 20 and budget["num_envs_per_env_runner"] == 10  # ... < the budget ...
@@ -92,7 +92,40 @@ def test_trial_fields_are_resolved_once_in_order(tmp_path, monkeypatch):
               "overrides": {"langevin_steps": 40, "beta": 3.0}, "__trial_index__": 1}
     spec = spaces.trial_spec(config)
     assert spec.seed == 1 and spec.sampled == {"langevin_steps": 40, "beta": 3.0} and not spec.default
-    assert spec.lac_params == spaces.trial_params("SafetyPointButton1-v0", "smoke", {}, spec.sampled)
-    assert (spec.lac_params["langevin_steps"], spec.lac_params["replay_capacity"]) == (40, 2_000)
+    assert spec.params == spaces.trial_params("SafetyPointButton1-v0", "smoke", {}, spec.sampled)
+    assert (spec.params["langevin_steps"], spec.params["replay_capacity"]) == (40, 2_000)
     same = spaces.trial_spec({**config, "overrides": {"langevin_steps": 50, "beta": 2.0}})
-    assert same.default and same.lac_params["langevin_steps"] == 50  # the task's own T, sampled again
+    assert same.default and same.params["langevin_steps"] == 50  # the task's own T, sampled again
+
+
+def test_the_compare_space_runs_every_algorithm_at_one_budget(tmp_path, monkeypatch):
+    plan = _plan(tmp_path, monkeypatch, "--space", "compare")
+    assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 9)
+    assert [t.algo for t in plan.trials] == ["lac"] * 3 + ["ppo_lag"] * 3 + ["sac_lag"] * 3
+    assert [t.params["algo"] for t in plan.trials] == [t.algo for t in plan.trials]
+    assert [t.default for t in plan.trials] == [True] * 3 + [False] * 6  # LAC's defaults: the reference
+    assert {t.config_label() for t in plan.trials} == {f"compare-algo={a}-PointHazard-v0" for a in
+                                                       ("lac", "ppo_lag", "sac_lag")}
+    assert "langevin_steps" not in plan.trials[3].params and "langevin_steps" in plan.trials[0].params
+    assert plan.estimated_wall_s / 60 <= 35
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (("--space", "compare", "--set", "algo=sac_lag"), "the space runs every algorithm"),
+    (("--space", "ablation", "--set", "algo=ppo_lag"), "--space ablation sweeps LAC's own fields"),
+    (("--space", "paper", "--set", "algo=dqn"), "unknown algo 'dqn'; accepted: lac | ppo_lag | sac_lag"),
+    (("--space", "compare", "--set", "langevin_steps=5"), "a field of lac, not of ppo_lag"),
+])
+def test_an_algorithm_a_sweep_cannot_run_is_refused_before_ray(tmp_path, monkeypatch, argv, needle):
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        _plan(tmp_path, monkeypatch, *argv)
+
+
+def test_a_baseline_runs_in_the_paper_space_with_its_own_preset(tmp_path, monkeypatch):
+    plan = _plan(tmp_path, monkeypatch, "--space", "paper", "--task", "lac/PointHazard-v0", "--seeds", "1",
+                 "--set", "algo=sac_lag")
+    (trial,) = plan.trials
+    assert trial.algo == "sac_lag" and trial.config_label() == "sac_lag-paper-PointHazard-v0"
+    from lac_rllib.algorithms.sac_lag.config import PRESETS
+
+    assert all(trial.params[k] == v for k, v in PRESETS["tiny"].items() if k != "total_env_steps")

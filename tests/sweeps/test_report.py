@@ -146,3 +146,25 @@ def test_write_sweep_reports(tmp_path):
     best = json.loads(Path(paths["best.json"]).read_text())
     assert best["mean_feasible"] is True and best["n_seeds"] >= 2
     assert_png(paths["learning_curves.png"])
+
+
+def test_a_compare_sweep_puts_every_algorithm_beside_lac():
+    """P(LAC beats X) is read off the hand-made seeds (U statistic, ties one half); the best
+    algorithm within the limit is the feasible one with the most return, not the top return."""
+    rows = [_trial(f"l{s}", "lac", s, r, c, group="compare", param="algo", limit=2.0)
+            for s, (r, c) in enumerate([(10.0, 1.0), (12.0, 1.5), (14.0, 0.5)])]
+    rows += [_trial(f"p{s}", "ppo_lag", s, r, c, group="compare", param="algo", limit=2.0)
+             for s, (r, c) in enumerate([(11.0, 0.2), (8.0, 0.1), (9.0, 0.3)])]  # LAC returns beat 8 of 9 pairs
+    rows += [_trial(f"s{s}", "sac_lag", s, r, c, group="compare", param="algo", limit=2.0)
+             for s, (r, c) in enumerate([(30.0, 9.0), (31.0, 8.0), (29.0, 7.0)])]  # most return, infeasible
+    df = pd.DataFrame(rows)
+    df["default"] = df["value"].eq("lac")
+    text = report.algorithm_comparison(report.summarize(df))
+    ppo = next(line for line in text.splitlines() if line.startswith("| ppo_lag |"))
+    cells = [c.strip() for c in ppo.strip("|").split("|")]
+    assert cells[-2:] == [f"{8 / 9:.2f}", "0.00"]  # LAC's return beats PPO-Lag's in 8 of 9 pairs; its cost never
+    sac = next(line for line in text.splitlines() if line.startswith("| sac_lag |"))
+    assert [c.strip() for c in sac.strip("|").split("|")][-2:] == ["0.00", "1.00"]
+    assert "**Best within the limit:** lac, return 12.00" in text
+    assert "| lac | 3 |" in text and "– | – |" in text.split("| lac |")[1].splitlines()[0]
+    assert report.algorithm_comparison(report.summarize(hand_table())) == ""  # no algorithms compared

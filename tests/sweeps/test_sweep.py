@@ -442,3 +442,40 @@ def test_a_two_cpu_trial_samples_with_two_env_runners(ray_session, tmp_path):
     for run in children:
         assert run.info.status == "FINISHED" and run.data.metrics["env_steps"] == 2000
         assert run.data.params["num_envs_per_env_runner"] == "1" and run.data.params["torch_threads"] == "2"
+
+
+@pytest.mark.slow
+def test_a_smoke_compare_sweep_runs_every_algorithm_and_evaluate_restores_each(ray_session, tmp_path, capsys):
+    """One trial per algorithm: each child run names its algorithm (param, tag, lac.config), logs ν
+    and the episode cost every iteration, the note puts the baselines beside LAC, and lac-eval
+    restores each checkpoint from MLflow (the chain only LAC's)."""
+    from sweeps import evaluate
+
+    args = cli.parse_args(["--space", "compare", "--budget", "smoke", "--seeds", "1", "--max-concurrent", "2",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                           "--storage", str(tmp_path / "ray_results"), "--experiment", "test"])
+    assert _sweep(tmp_path, args) == 0
+    client, parents, children = _runs(tmp_path)
+    by_algo = {c.data.params["algo"]: c for c in children}
+    assert sorted(by_algo) == ["lac", "ppo_lag", "sac_lag"]
+    for algo, c in by_algo.items():
+        assert c.info.status == "FINISHED" and c.data.tags["lac.algo"] == algo
+        assert c.data.tags["lac.config"] == f"compare-algo={algo}-PointHazard-v0"
+        steps = [m.step for m in client.get_metric_history(c.info.run_id, "episode_cost")]
+        assert steps and steps[-1] >= 2000, (algo, steps)
+        assert len(client.get_metric_history(c.info.run_id, "nu")) == len(steps)
+    assert "langevin_steps" in by_algo["lac"].data.params and "langevin_steps" not in by_algo["sac_lag"].data.params
+    note = parents[0].data.tags["mlflow.note.content"]
+    assert "**Algorithms on `lac/PointHazard-v0`**" in note and "| ppo_lag | 1 |" in note, note
+    capsys.readouterr()
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    for algo, c in by_algo.items():
+        code = evaluate.main(["--run-id", c.info.run_id, "--tracking-uri", uri, "--episodes", "1", "--json",
+                              "--no-progress"])
+        out = capsys.readouterr().out
+        assert code == 0 and json.loads(out.strip().splitlines()[-1])["algo"] == algo, out
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--run-id", by_algo["ppo_lag"].info.run_id, "--tracking-uri", uri, "--actions", "langevin"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "--actions langevin is LAC's" in err and "accepted: --actions generator" in err
+    assert len(err.strip().splitlines()) == 1, err

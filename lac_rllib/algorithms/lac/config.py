@@ -27,6 +27,7 @@ from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
+from lac_rllib.constrained.cpus import check_cpus, run_resources, runner_cpus, use_cpus  # noqa: F401 (re-exported)
 from lac_rllib.constrained.fields import (
     BOOL,
     FINITE,
@@ -344,42 +345,3 @@ def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
         use_cpus(config, cpus)
     config.validate()
     return config
-
-
-def use_cpus(config: LACConfig, cpus: int) -> None:
-    """Sample with ``cpus`` env runners and update with ``cpus`` torch threads: the same algorithm
-    (sample, then update, each iteration) on more CPUs. The envs of an iteration stay the same:
-    ``num_envs_per_env_runner`` envs split evenly over the runners (10 → 2 × 5), so an iteration
-    holds the same episodes, and ν (eq. 14) reads as many completed ones, as on one CPU. Sampling
-    and updating take turns, so the run reserves ``cpus`` CPUs in all: 1 for the driver and its
-    learner, (cpus − 1)/cpus for each runner (:func:`run_resources` for a Tune trial)."""
-    envs = config.num_envs_per_env_runner
-    check_cpus(envs, cpus)
-    if cpus == 1:
-        return
-    config.env_runners(num_env_runners=cpus, num_envs_per_env_runner=envs // cpus,
-                       num_cpus_per_env_runner=runner_cpus(cpus))
-    config.training(torch_threads=cpus)
-
-
-def runner_cpus(cpus: int) -> float:
-    """The CPU share each of a ``cpus``-CPU run's env runners reserves (the driver reserves 1)."""
-    return (cpus - 1) / cpus
-
-
-def run_resources(cpus: int):
-    """What a Tune trial of a ``cpus``-CPU run reserves: the driver's bundle (it holds the learner)
-    and one bundle per env runner, which RLlib places its runners in (``cpus`` CPUs in all)."""
-    from ray.tune import PlacementGroupFactory
-
-    if cpus == 1:
-        return {"cpu": 1}
-    return PlacementGroupFactory([{"CPU": 1.0}] + [{"CPU": runner_cpus(cpus)}] * cpus)
-
-
-def check_cpus(envs: int, cpus: int, flag: str = "--cpus") -> None:
-    """Raise a ValueError naming the accepted CPU counts unless ``envs`` envs split evenly over ``cpus``."""
-    if not (isinstance(cpus, int) and cpus >= 1) or envs % cpus:
-        divisors = ", ".join(str(d) for d in range(1, envs + 1) if envs % d == 0)
-        raise ValueError(f"{flag} {cpus} is invalid with num_envs_per_env_runner={envs}: the envs must split evenly "
-                         f"over the env runners; accepted: {divisors} (or --set num_envs_per_env_runner=...)")

@@ -64,6 +64,10 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
     def _forward_exploration(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
         return self._forward_inference(batch)
 
+    def deterministic_action(self, obs: torch.Tensor) -> torch.Tensor:
+        """The generator's mean μ_φ(s): what inference acts with (``lac-eval --actions generator``)."""
+        return self.actor(obs)[0]
+
     # ----- training (learner) -----
     @override(TorchRLModule)
     def _forward_train(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:

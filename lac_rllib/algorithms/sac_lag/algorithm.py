@@ -1,0 +1,53 @@
+"""SACLag(OffPolicySafeAlgorithm): OmniSafe's SACLag on RLlib's new API stack, on LAC's skeleton.
+
+One ``training_step``:
+  1. sample ``env_steps_per_iteration`` steps (uniformly random actions while fewer than
+     ``random_env_steps`` were sampled [O: start_learning_steps]) into the replay buffer;
+  2. once ``random_env_steps`` are reached, one ``learner_group.update`` call of
+     ``updates_per_env_step`` × (new env steps) minibatches over the whole buffer, handing the
+     learner the costs of the episodes completed in the batch (it keeps the last ``cost_window``
+     for Ĵ_C). One call per iteration, not one per minibatch: each call costs ~0.1 s of RLlib's
+     machinery (docs/dependencies.md, "Cost of an update call").
+"""
+
+from __future__ import annotations
+
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.algorithms.sac_lag.config import SACLagConfig
+from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
+from lac_rllib.constrained.off_policy import OffPolicySafeAlgorithm
+
+
+class SACLag(OffPolicySafeAlgorithm):
+    ALGO = "sac_lag"
+
+    @classmethod
+    @override(OffPolicySafeAlgorithm)
+    def get_default_config(cls) -> SACLagConfig:
+        return SACLagConfig(cls)
+
+    @override(OffPolicySafeAlgorithm)
+    def training_step(self) -> None:
+        cfg = self.config
+        before = self.lifetime_env_steps
+        returns, costs = self.sample_into_replay(random_actions=before < cfg.random_env_steps)
+        new_steps = self.lifetime_env_steps - before
+        updating = self.lifetime_env_steps >= cfg.random_env_steps
+        if updating:
+            self.update_from_replay(
+                minibatch_size=cfg.batch_size,
+                num_minibatches=max(1, round(cfg.updates_per_env_step * new_steps)),
+                timesteps={TS_EPISODE_COSTS: list(costs)},
+                # num_epochs > 1 with a reshuffle: RLlib's MiniBatchCyclicIterator then reshuffles the
+                # buffer every time the minibatches wrap around it (at one update per env step an
+                # iteration draws several times a small buffer's rows); num_minibatches sets the steps.
+                num_epochs=2, shuffle_batch_per_epoch=True,
+            )
+        self.log_top_level(returns, costs)
+        if not updating:
+            # No learner results yet, so log_top_level found no ν: report λ as the learner holds it
+            # (λ₀), so that every row has a finite ν.
+            results = self.learner_group.foreach_learner(lambda learner: float(learner.module[DEFAULT_MODULE_ID].nu))
+            self.metrics.log_value(NU, next(iter(results)).get(), window=1)

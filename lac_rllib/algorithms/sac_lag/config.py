@@ -1,0 +1,261 @@
+"""SACLagConfig: SAC-Lagrangian's fields, each declared once with its default and source.
+
+SAC-Lag is a baseline of ours (the paper has none), built on LAC's skeleton and following OmniSafe's
+``SACLag`` (``algorithms/off_policy/sac_lag.py`` on ``sac.py``/``ddpg.py``, ``configs/off-policy/
+SACLag.yaml``; the design and its deviations: docs/baselines.md). Fields live in
+:class:`SACLagParams`; ``SACLagConfig`` copies them onto itself, checks each as it is set and
+exposes the same module-level names as every algorithm (lac_rllib/algorithms/registry.py).
+Source tags: [O] OmniSafe, [F] FSRL, [D] ours.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
+from ray.rllib.connectors.common.batch_individual_items import BatchIndividualItems
+from ray.rllib.connectors.learner import (
+    AddNextObservationsFromEpisodesToTrainBatch,
+    AddObservationsFromEpisodesToBatch,
+)
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.algorithms.lac.networks import ACTIVATIONS
+from lac_rllib.constrained import fields
+from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
+from lac_rllib.constrained.cpus import use_cpus
+from lac_rllib.constrained.fields import (
+    BOOL,
+    FINITE,
+    FRACTION,
+    INT_GE_0,
+    INT_GE_1,
+    LAYERS,
+    NON_NEGATIVE,
+    POSITIVE,
+    one_of,
+    or_none,
+    param,
+)
+from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
+
+LAGRANGIAN_RULES = ("adam", "gradient")
+
+
+@dataclasses.dataclass
+class SACLagParams(SafeTaskParams):
+    """The SAC-Lag hyperparameters, after the fields every constrained algorithm has
+    (:class:`SafeTaskParams`). Defaults are OmniSafe's SACLag.yaml defaults (its MuJoCo column).
+
+    Each field: ``name: type = param(default, accepts=...)`` and, below it, its docstring.
+    """
+
+    # --- losses ---
+    alpha: float = param(0.2, accepts=NON_NEGATIVE)
+    """α, the fixed entropy coefficient in the reward target and the actor loss [O: auto_alpha off]."""
+    cost_gamma: float = param(0.99, accepts=FRACTION)
+    """γ_C, the discount of the cost critic's target [O: the same γ as the reward's, 0.99]."""
+
+    # --- actor ---
+    actor_lr: float = param(3e-4, accepts=POSITIVE)
+    """Adam learning rate of the actor [O], constant [O: linear_lr_decay off]."""
+    actor_hidden: tuple = param((256, 256), accepts=LAYERS)
+    """Hidden layers of the actor MLP (obs → μ, log σ) [O]."""
+    log_std_min: float = param(-20.0, accepts=FINITE)
+    """Lower clamp of the actor's log σ(s) [O]."""
+    log_std_max: float = param(2.0, accepts=FINITE)
+    """Upper clamp of the actor's log σ(s) [O]."""
+
+    # --- critics ---
+    critic_lr: float = param(3e-4, accepts=POSITIVE)
+    """Adam learning rate of the two reward critics and the cost critic [O]."""
+    critic_hidden: tuple = param((256, 256), accepts=LAYERS)
+    """Hidden layers of each critic (obs+act → MLP → Q) [O]."""
+    activation: str = param("relu", accepts=one_of(ACTIVATIONS))
+    """Activation of the actor and the critics [O]."""
+    max_grad_norm: float | None = param(40.0, accepts=or_none(POSITIVE))
+    """Global gradient-norm clip of each network: the reward critics, the cost critic, the actor
+    [O]; None = off."""
+    polyak_tau: float = param(0.005, accepts=FRACTION)
+    """Polyak τ of both target critics [O: polyak]."""
+    policy_delay: int = param(2, accepts=INT_GE_1)
+    """The actor step and Polyak happen on every policy_delay-th gradient step only [O]."""
+
+    # --- Lagrange multiplier ---
+    nu_init: float = param(0.001, accepts=NON_NEGATIVE)
+    """λ₀, the multiplier at the start [O: lagrangian_multiplier_init]."""
+    lagrangian_rule: str = param("adam", accepts=one_of(LAGRANGIAN_RULES))
+    """"adam": Adam on −λ·(Ĵ_C − b), then λ ≥ 0 [O]; "gradient": λ + lr·(Ĵ_C − b), LAC's eq. (14) [D]."""
+    lagrangian_lr: float = param(1e-5, accepts=NON_NEGATIVE)
+    """The learning rate of λ's rule [O: lambda_lr]; 0 pins λ at λ₀."""
+    warmup_env_steps: int = param(200_000, accepts=INT_GE_0)
+    """λ takes no step until more env steps than this are sampled [O: warmup_epochs 100 × 2000 steps]."""
+    cost_window: int = param(10, accepts=INT_GE_1)
+    """Ĵ_C is the mean cost of the last cost_window completed episodes [O: logger window_lens]."""
+
+    # --- data and schedule ---
+    env_steps_per_iteration: int = param(2000, accepts=INT_GE_1)
+    """Env steps sampled per iteration, then trained on in one update call [D]. OmniSafe updates
+    after every env step; here the policy is fixed within an iteration (the price of paying
+    RLlib's per-call overhead once per iteration)."""
+    num_envs_per_env_runner: int = param(1, accepts=INT_GE_1)
+    """Envs each env runner steps together (RLlib's own field) [D]."""
+    updates_per_env_step: float = param(1.0, accepts=POSITIVE)
+    """Gradient steps per new env step: an iteration makes updates_per_env_step × its env steps
+    [O: update_cycle = update_iters = 1]."""
+    batch_size: int = param(256, accepts=INT_GE_1)
+    """Minibatch size of each gradient step [O]."""
+    replay_capacity: int = param(1_000_000, accepts=INT_GE_1)
+    """Replay buffer capacity in env steps [O: size]."""
+    random_env_steps: int = param(10_000, accepts=INT_GE_0)
+    """Iterations act uniformly at random while fewer env steps than this are sampled, and make no
+    gradient step before the first iteration that reaches it [O: start_learning_steps]."""
+    store_replay_buffer: bool = param(True, accepts=BOOL)
+    """Keep the replay buffer in checkpoints [D], so a resumed run trains on the data it had."""
+    torch_threads: int = param(1, accepts=INT_GE_1)
+    """Intra-op torch threads of the learner process [D]; a sweep sets it to the CPUs of a trial."""
+
+
+# [O] SACLag.yaml: its defaults (the MuJoCo column); its Goal1/Circle1 overrides for the
+# navigation tasks; obs_normalize False everywhere. "tiny" [D] learns lac/PointHazard-v0 within
+# the limit in ~20k env steps (tests/algorithms/sac_lag/test_sac_lag_learning.py): small nets,
+# short warm-ups, α small enough that the entropy bonus (up to ~α·1.4 a step) does not outweigh
+# the step penalty 0.1, and a λ learning rate at which Adam (steps of ~lr) moves λ by ~1 per
+# 1000-step iteration, fast enough to act within the run.
+PRESETS: dict[str, dict[str, Any]] = {
+    "mujoco": {"obs_normalization": False},
+    "safety_gym": {"obs_normalization": False, "alpha": 1e-5, "actor_lr": 5e-6, "critic_lr": 1e-3,
+                   "nu_init": 0.0, "lagrangian_lr": 5e-7},
+    "tiny": {
+        "obs_normalization": False,
+        "env_steps_per_iteration": 1000,
+        "num_envs_per_env_runner": 10,
+        "actor_hidden": (64, 64),
+        "critic_hidden": (64, 64),
+        "replay_capacity": 50_000,
+        "random_env_steps": 2000,
+        "alpha": 0.01,
+        "nu_init": 0.0,
+        "lagrangian_lr": 1e-3,
+        "warmup_env_steps": 5000,
+    },
+}
+
+FIELDS = fields.FieldSet(SACLagParams, "SAC-Lag")
+FIELD_NAMES = FIELDS.names
+
+
+class SACLagConfig(SafeTaskConfig, AlgorithmConfig):
+    """Config for :class:`lac_rllib.algorithms.sac_lag.algorithm.SACLag`; the fields are
+    :class:`SACLagParams`'. ``SACLagConfig().task(id)`` sets the env, its cost convention and the
+    task's preset; explicit ``training(...)`` values win over the preset."""
+
+    PRESETS = PRESETS
+
+    def __init__(self, algo_class=None):
+        from lac_rllib.algorithms.sac_lag.algorithm import SACLag
+
+        super().__init__(algo_class=algo_class or SACLag)
+        for f in dataclasses.fields(SACLagParams):
+            setattr(self, f.name, f.default)
+        # RLlib fields with SAC-Lag's values.
+        self.gamma = 0.99  # [O]
+        self.train_batch_size_per_learner = self.batch_size
+        # The squashed Gaussian acts within the bounds and random actions come from the action
+        # space: both are stored in the env's units, as the critics see them.
+        self.clip_actions = False
+        self.normalize_actions = False
+        self.rollout_fragment_length = "auto"
+
+    @override(AlgorithmConfig)
+    def training(self, **kwargs) -> "SACLagConfig":
+        own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELD_NAMES}
+        super().training(**kwargs)
+        for name, value in own.items():
+            if value is NotProvided:
+                continue
+            if name in ("actor_hidden", "critic_hidden") and isinstance(value, list):
+                value = tuple(value)
+            FIELDS.check(name, value)
+            setattr(self, name, value)
+        if "batch_size" in own:
+            self.train_batch_size_per_learner = self.batch_size
+        return self
+
+    # ----- RLlib hooks -----
+    @override(AlgorithmConfig)
+    def validate(self) -> None:
+        super().validate()
+        for name, value in self.params().items():
+            FIELDS.check(name, value)
+        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
+        if self.log_std_min >= self.log_std_max:
+            raise ValueError(f"SAC-Lag config fields log_std_min={self.log_std_min!r} and log_std_max="
+                             f"{self.log_std_max!r} are invalid together; accepted: log_std_min < log_std_max")
+
+    @override(AlgorithmConfig)
+    def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
+        # "auto" splits env_steps_per_iteration (not the minibatch size) over the runners, as LAC's.
+        if self.rollout_fragment_length != "auto":
+            return self.rollout_fragment_length
+        n = self.num_envs_per_env_runner * (self.num_env_runners or 1)
+        base, extra = divmod(self.env_steps_per_iteration, n)
+        idx = max(worker_index - 1, 0)
+        return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
+
+    @override(AlgorithmConfig)
+    def build_learner_connector(self, input_observation_space, input_action_space, device=None):
+        """RLlib's learner pipeline plus s' for the targets, then each row's cost (right after s':
+        docs/dependencies.md, "The cost column"), then a shuffle of the rows, as LAC's."""
+        pipeline = super().build_learner_connector(
+            input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
+        pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch())
+        pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
+        pipeline.insert_after(BatchIndividualItems, ShuffleRows(seed=self.seed))
+        return pipeline
+
+    @override(AlgorithmConfig)
+    def get_default_rl_module_spec(self) -> RLModuleSpec:
+        from lac_rllib.algorithms.sac_lag.module import SACLagTorchRLModule
+
+        return RLModuleSpec(module_class=SACLagTorchRLModule)
+
+    @override(AlgorithmConfig)
+    def get_default_learner_class(self):
+        from lac_rllib.algorithms.sac_lag.learner import SACLagTorchLearner
+
+        return SACLagTorchLearner
+
+    @property
+    @override(AlgorithmConfig)
+    def _model_config_auto_includes(self) -> dict[str, Any]:
+        # The module needs the network sizes, the log σ clamp and λ₀.
+        return {**super()._model_config_auto_includes, **self.params()}
+
+
+SACLagConfig.PARAMS, SACLagConfig.FIELDS = SACLagParams, FIELDS
+CONFIG_CLASS, PARAMS = SACLagConfig, SACLagParams
+#: What ``lac-eval --actions`` accepts for a SAC-Lag policy: squash(μ(s)) (module.deterministic_action).
+ACTIONS = ("generator",)
+#: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
+SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads"})
+
+
+def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
+                 timesteps: int | None = None, cpus: int = 1) -> SACLagConfig:
+    """The SACLagConfig of a run on ``task`` (validated; no Ray needed), as LAC's build_config.
+
+    ``timesteps`` is accepted for the common interface; SAC-Lag has no schedule over the budget
+    [O: constant learning rates], so it changes nothing. ``cpus`` > 1 samples with that many env
+    runners and updates with that many torch threads (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
+    config = SACLagConfig().task(task).training(**sets).debugging(seed=seed)
+    config.env_runners(num_env_runners=num_env_runners)
+    if cpus != 1:
+        if num_env_runners:
+            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
+                             "accepted: one of the two")
+        use_cpus(config, cpus)
+    config.validate()
+    return config
