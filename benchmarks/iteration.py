@@ -31,6 +31,12 @@ iteration would reach with the chain exactly at that floor (the ceiling of float
 ``--cpus 2`` times the current configuration's whole iteration on one CPU and on two
 (``lac-train --cpus 2``: two env runners sample, two torch threads update; lac_rllib.algorithms.lac.config.use_cpus),
 same buffer, same run, and prints the ratio (issue 24's goal: >= 1.6x).
+
+``--algos lac,ppo_lag,sac_lag`` times each algorithm at the task's preset on one CPU, same run:
+seconds per ``--steps`` env steps (default 20k) of training after a warm-up of as many (LAC with its
+random phase and the actor's delay off, SAC-Lag's random steps within the warm-up), and for the
+off-policy ones the share of RLlib's per-call overhead (one ``learner_group.update`` per iteration:
+the calls times the cost of an update call of one minibatch, measured in the same run).
 """
 
 from __future__ import annotations
@@ -206,6 +212,45 @@ def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> 
         algo.stop()
 
 
+def time_algorithm(algo: str, task: str, seed: int, steps: int) -> dict[str, float]:
+    """Seconds of ``algo``'s training over ``steps`` env steps after a warm-up of ``steps``, its
+    update calls, and the seconds of one update call of one minibatch (RLlib's per-call overhead
+    plus one step)."""
+    from lac_rllib.algorithms.registry import build_config
+
+    sets = {"lac": {"random_iterations": 0, "actor_update_start_iteration": 0},
+            "sac_lag": {"random_env_steps": steps // 2}}.get(algo, {})
+    config = build_config(algo, task, seed, sets, timesteps=10**9)
+    algo_obj = config.build_algo()
+    try:
+        def lifetime():
+            return algo_obj.metrics.peek(("env_runners", "num_env_steps_sampled_lifetime"), default=0)
+
+        while lifetime() < steps:
+            algo_obj.train()
+        calls = [0]
+        update = algo_obj.learner_group.update
+
+        def counted(*args, **kwargs):
+            calls[0] += 1
+            return update(*args, **kwargs)
+
+        algo_obj.learner_group.update = counted
+        start, t0 = lifetime(), time.perf_counter()
+        while lifetime() < start + steps:
+            algo_obj.train()
+        seconds, done = time.perf_counter() - t0, lifetime() - start
+        algo_obj.learner_group.update = update
+        per_call = float("nan")
+        if hasattr(algo_obj, "replay_buffer"):  # one update call of one minibatch, timed
+            t1 = time.perf_counter()
+            algo_obj.update_from_replay(minibatch_size=256, num_minibatches=1, timesteps={})
+            per_call = time.perf_counter() - t1
+    finally:
+        algo_obj.stop()
+    return {"seconds": seconds * steps / done, "calls": calls[0] * steps / done, "per_call_s": per_call}
+
+
 def table(task: str, results: dict[str, dict[str, float]]) -> str:
     names = list(results)
     lines = [f"### {task}", "", "| phase | " + " | ".join(f"{n} (s)" for n in names) + " | baseline / current |",
@@ -232,6 +277,9 @@ def main(argv=None) -> int:
     parser.add_argument("--variant", action="append", default=[], metavar="NAME:F=V,...",
                         help="another configuration to time (lac-train --set syntax)")
     parser.add_argument("--out", default=None, help="also write the tables (markdown) here")
+    parser.add_argument("--algos", default=None, metavar="A,B,...",
+                        help="instead of the phases: seconds per --steps env steps of each algorithm, one CPU")
+    parser.add_argument("--steps", type=int, default=20_000, help="env steps timed per algorithm (--algos)")
     parser.add_argument("--cpus", type=int, default=None, metavar="N",
                         help="instead of the phases: whole iterations on 1 CPU against N CPUs, and their ratio")
     args = parser.parse_args(argv)
@@ -258,6 +306,23 @@ def main(argv=None) -> int:
     what = f"on 1 and {args.cpus} CPUs" if args.cpus else "one CPU"
     out = [f"One LAC iteration per configuration, {what}. {runtime_versions()}, "
            f"torch {torch.__version__}, CPU capability {torch.backends.cpu.get_cpu_capability()}.", ""]
+    if args.algos:
+        for task in args.tasks:
+            lines = [f"### {task}", "", f"| algorithm | s per {args.steps:,} env steps | / LAC | update calls | "
+                     "per-call overhead share |", "|---|---:|---:|---:|---:|"]
+            times = {a: time_algorithm(a, task, args.seed, args.steps) for a in args.algos.split(",")}
+            for a, r in times.items():
+                share = r["calls"] * r["per_call_s"] / r["seconds"] if r["per_call_s"] == r["per_call_s"] else None
+                lac = times.get("lac", {}).get("seconds")
+                lines.append(f"| {a} | {r['seconds']:.1f} | {r['seconds'] / lac:.2f}x | {r['calls']:.0f} | "
+                             + ("–" if share is None else f"≤ {share:.1%}") + " |" if lac else
+                             f"| {a} | {r['seconds']:.1f} | – | {r['calls']:.0f} | – |")
+            print("\n".join(lines) + "\n", flush=True)
+            out += [*lines, ""]
+        if args.out:
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.out).write_text("\n".join(out))
+        return 0
     if args.cpus:
         for task in args.tasks:
             prefill = prefill_episodes(task, args.seed)
