@@ -6,6 +6,17 @@ sweep's ``--cpus-per-trial``. The config has ``num_envs_per_env_runner`` and ``t
 from __future__ import annotations
 
 
+def set_runners(config, num_env_runners: int, cpus: int) -> None:
+    """``num_env_runners`` remote env runners (0: sample in the driver), or the run on ``cpus`` CPUs
+    (:func:`use_cpus`); not both (every algorithm's ``build_config``)."""
+    config.env_runners(num_env_runners=num_env_runners)
+    if cpus != 1:  # use_cpus refuses 0 or a count that does not split the envs
+        if num_env_runners:
+            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
+                             "accepted: one of the two")
+        use_cpus(config, cpus)
+
+
 def use_cpus(config, cpus: int) -> None:
     """Sample with ``cpus`` env runners and update with ``cpus`` torch threads: the same algorithm
     (sample, then update, each iteration) on more CPUs. The envs of an iteration stay the same:

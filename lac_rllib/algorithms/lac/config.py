@@ -27,7 +27,7 @@ from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
-from lac_rllib.constrained.cpus import check_cpus, run_resources, runner_cpus, use_cpus  # noqa: F401 (re-exported)
+from lac_rllib.constrained.cpus import check_cpus, run_resources, runner_cpus, set_runners, use_cpus  # noqa: F401
 from lac_rllib.constrained.fields import (
     BOOL,
     FINITE,
@@ -337,11 +337,6 @@ def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
     if timesteps is not None:
         sets = {"total_env_steps": int(timesteps), **sets}
     config = LACConfig().task(task).training(**sets).debugging(seed=seed)
-    config.env_runners(num_env_runners=num_env_runners)
-    if cpus != 1:  # use_cpus refuses 0 or a count that does not split the envs
-        if num_env_runners:
-            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
-                             "accepted: one of the two")
-        use_cpus(config, cpus)
+    set_runners(config, num_env_runners, cpus)
     config.validate()
     return config

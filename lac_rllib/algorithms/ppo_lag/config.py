@@ -277,17 +277,12 @@ def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
     """The PPOLagConfig a run of ``timesteps`` env steps uses (validated; no Ray needed): the task's
     preset (or ``sets["preset"]``), then ``sets``. The budget is the policy lr's decay horizon.
     ``cpus`` > 1 samples with that many env runners and updates with that many threads (LAC's use_cpus)."""
-    from lac_rllib.constrained.cpus import use_cpus
+    from lac_rllib.constrained.cpus import set_runners
 
     if timesteps is not None:
         sets = {"total_env_steps": int(timesteps), **sets}
     sets = dict(sets)
     config = PPOLagConfig().task(task, preset=sets.pop("preset", None)).training(**sets).debugging(seed=seed)
-    config.env_runners(num_env_runners=num_env_runners)
-    if cpus != 1:
-        if num_env_runners:
-            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
-                             "accepted: one of the two")
-        use_cpus(config, cpus)
+    set_runners(config, num_env_runners, cpus)
     config.validate()
     return config

@@ -25,7 +25,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
-from lac_rllib.constrained.cpus import use_cpus
+from lac_rllib.constrained.cpus import set_runners
 from lac_rllib.constrained.fields import (
     BOOL,
     FINITE,
@@ -251,11 +251,6 @@ def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
     [O: constant learning rates], so it changes nothing. ``cpus`` > 1 samples with that many env
     runners and updates with that many torch threads (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
     config = SACLagConfig().task(task).training(**sets).debugging(seed=seed)
-    config.env_runners(num_env_runners=num_env_runners)
-    if cpus != 1:
-        if num_env_runners:
-            raise ValueError(f"--cpus {cpus} with --num-env-runners {num_env_runners}: the CPUs set the env runners; "
-                             "accepted: one of the two")
-        use_cpus(config, cpus)
+    set_runners(config, num_env_runners, cpus)
     config.validate()
     return config
