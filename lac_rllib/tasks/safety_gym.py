@@ -1,29 +1,41 @@
-"""Safety-Gymnasium tasks (docs/spec.md §6): navigation (Point/Car × Goal1/Button1) and velocity v1.
+"""Safety-Gymnasium tasks (docs/spec.md §6; every id and its sizes: docs/tasks.md).
+
+Registered: every Safety-Gymnasium 1.0 navigation task with flat observations (robots Point,
+Car, Doggo, Racecar, Ant × Goal/Button/Push/Circle levels 0-2 and Run0: 65 ids) and the six
+velocity v1 tasks (Ant, HalfCheetah, Hopper, Humanoid, Swimmer, Walker2d). The Vision variants
+(``...Vision-v0``: dict observations, not flat Boxes) and the keyboard ``...Debug-v0`` ids are
+not registered; neither are the velocity v0 tasks (OmniSafe reports v1).
 
 Every env built here is safety_gymnasium's own env (6-tuple ``step``) made through
 ``safety_gymnasium``'s ``make`` with the spec safety_gymnasium registered (so its usual wrappers
-apply: passive env checker, order enforcing and a 1000-step ``SafeTimeLimit``), then wrapped by
+apply: passive env checker, order enforcing and a ``SafeTimeLimit`` of the task's episode length:
+1000 steps, 500 for Circle and Run as safety_gymnasium registers them), then wrapped by
 :class:`SafetyToGymnasium` into the standard gymnasium 5-tuple form with the per-step cost in
 ``info["cost"]`` (a float), float32 observations and a float32 action space.
 
 Costs are safety_gymnasium's, unchanged:
 
-* navigation: ``info["cost"]`` ∈ {0, 1} (Goal1: hazards; Button1: hazards, gremlins, wrong
-  buttons), episode cost = plain sum, limit 25, LAC preset ``"safety_gym"``;
+* navigation: ``info["cost"]`` ∈ {0, 1} (an indicator of any violation: the sources per task
+  and level are in :data:`NAV_COSTS`; Goal0/Button0/Push0/Circle0 have none: cost always 0),
+  episode cost = plain sum, limit 25, LAC preset ``"safety_gym"``;
 * velocity v1 (the OmniSafe/Safety-Gymnasium convention): indicator cost
-  1[speed > 2.6222] (Ant), 1[vx > 0.2282] (Swimmer), 1[speed > 1.4149] (Humanoid), summed,
-  limit 25, LAC preset ``"mujoco"``. The underlying envs are gymnasium's ``*_v4`` MuJoCo envs.
+  1[speed > threshold] (Ant: torso, Humanoid: centre of mass) or 1[vx > threshold] (the planar
+  ones), thresholds in :data:`VELOCITY`, summed, limit 25, LAC preset ``"mujoco"``. The
+  underlying envs are gymnasium's ``*_v4`` MuJoCo envs.
 
 The ids are the same as safety_gymnasium's. Our registrations win in gymnasium's registry
 (``gym.make("SafetyPointGoal1-v0")`` gives the 5-tuple env built here);
 ``safety_gym_compat.apply()`` keeps safety_gymnasium's own specs for its ``make``.
 
-Importing this module is cheap: mujoco and safety_gymnasium are imported by the factory only.
+Importing this module is cheap: mujoco and safety_gymnasium are imported by the factory only
+(hence the sizes below are a measured table, not read from the envs;
+tests/tasks/test_safety_gym.py checks them against the envs).
 
 env_config keys understood by :func:`make_env`: ``env_id`` (set by the task's kwargs),
-``max_episode_steps`` (default 1000), ``render_mode`` (default None), ``light_resets`` (default
-True: navigation resets skip the render-only skybox when there is no render_mode,
-lac_rllib.tasks.light_resets). Other keys (e.g. RLlib's ``num_envs``) are ignored.
+``max_episode_steps`` (default: the task's, :func:`episode_steps`), ``render_mode`` (default
+None), ``light_resets`` (default True: navigation resets skip the render-only skybox when there
+is no render_mode, lac_rllib.tasks.light_resets). Other keys (e.g. RLlib's ``num_envs``) are
+ignored.
 """
 
 from __future__ import annotations
@@ -39,6 +51,7 @@ from lac_rllib.tasks import light_resets
 from lac_rllib.tasks.registry import MUJOCO, SAFETY_GYM, TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.safety_gym:make_env"
+#: Episode length of every task but those in :data:`NAV_EPISODE_STEPS`.
 MAX_EPISODE_STEPS = 1000
 
 
@@ -104,29 +117,120 @@ def make_env(env_config: dict | None = None) -> gym.Env:
         warnings.filterwarnings("ignore", "overflow encountered in cast", RuntimeWarning)
         inner = safety_make(
             safety_gym_compat.safety_spec(env_id),
-            max_episode_steps=int(cfg.get("max_episode_steps", MAX_EPISODE_STEPS)),
+            max_episode_steps=int(cfg.get("max_episode_steps", episode_steps(env_id))),
             **kwargs,
         )
         light = bool(cfg.get("light_resets", True)) and cfg.get("render_mode") is None
         return SafetyToGymnasium(inner, light_resets=light)
 
 
-def _nav(env_id: str, obs_dim: int, hazards: str, overrides: dict | None = None) -> TaskSpec:
+# --------------------------------------------------------------------------- the tasks
+#
+# Cost limit b = 25 and a plain sum (cost_gamma 1) for every task: OmniSafe's convention for the
+# Safety-Gymnasium tasks, which its benchmarks of these tasks report against (e.g.
+# omnisafe/configs/on-policy/PPOLag.yaml: ``lagrange_cfgs.cost_limit: 25.0``, ``cost_gamma:
+# 1.0``, one value for every task), and the limit docs/spec.md §6 gives the paper's tasks.
+
+#: Navigation robots: act_dim (actions in [-1, 1] but Racecar's: wheel velocity ±20, steering ±0.785).
+NAV_ROBOTS: dict[str, int] = {"Point": 2, "Car": 2, "Doggo": 12, "Racecar": 2, "Ant": 8}
+
+#: obs_dim per navigation task (family + level) for the robots in NAV_ROBOTS' order, measured once
+#: with safety_gymnasium 1.0.0 / mujoco 4.0.0. (They are the robot's own sensors, 12/24/56/12/40,
+#: plus 16 lidar bins per observed object kind.)
+NAV_OBS_DIMS: dict[str, tuple[int, int, int, int, int]] = {
+    #          Point Car Doggo Racecar Ant
+    "Goal0": (28, 40, 72, 28, 56),
+    "Goal1": (60, 72, 104, 60, 88),
+    "Goal2": (60, 72, 104, 60, 88),
+    "Button0": (44, 56, 88, 44, 72),
+    "Button1": (76, 88, 120, 76, 104),
+    "Button2": (76, 88, 120, 76, 104),
+    "Push0": (44, 56, 88, 44, 72),
+    "Push1": (76, 88, 120, 76, 104),
+    "Push2": (76, 88, 120, 76, 104),
+    "Circle0": (28, 40, 72, 28, 56),
+    "Circle1": (28, 40, 72, 28, 56),
+    "Circle2": (28, 40, 72, 28, 56),
+    "Run0": (12, 24, 56, 12, 40),
+}
+
+#: What makes ``info["cost"]`` 1 (safety_gymnasium/tasks/safe_navigation/*/: the constrained
+#: objects each level adds; level 0 has none, its cost is always 0, except Run0's walls).
+NAV_COSTS: dict[str, str] = {
+    "Goal0": "none: always 0",
+    "Goal1": "hazards",  # its one vase is not constrained
+    "Goal2": "hazards, vases touched or moving",
+    "Button0": "none: always 0",  # buttons not constrained
+    "Button1": "hazards, gremlins, wrong buttons",
+    "Button2": "hazards, gremlins, wrong buttons",
+    "Push0": "none: always 0",
+    "Push1": "hazards",  # its one pillar is not constrained
+    "Push2": "hazards, pillars",
+    "Circle0": "none: always 0",
+    "Circle1": "outside |x| <= 1.125",
+    "Circle2": "outside |x|, |y| <= 1.125",
+    "Run0": "outside |x| <= 0.5",
+}
+
+#: safety_gymnasium registers Circle and Run with 500-step episodes (its task classes'
+#: ``num_steps`` = 500 too); every other task runs 1000 steps.
+NAV_EPISODE_STEPS: dict[str, int] = {"Circle": 500, "Run": 500}
+
+#: Table 5 sets T = 50 Langevin steps on the Button1 tasks; we apply it to the whole Button family
+#: (levels 0-2), whose goal (press the one right button among several) is the same.
+NAV_OVERRIDES: dict[str, dict] = {"Button": {"langevin_steps": 50}}
+
+#: Velocity v1 tasks: robot → (obs_dim, act_dim, indicator) with the thresholds of
+#: safety_gymnasium/tasks/safe_velocity/*_v1.py (speed: planar, finite difference per step).
+VELOCITY: dict[str, tuple[int, int, str]] = {
+    "Ant": (27, 8, "1[sqrt(vx^2+vy^2) > 2.6222]"),  # torso
+    "HalfCheetah": (17, 6, "1[vx > 3.2096]"),
+    "Hopper": (11, 3, "1[vx > 0.7402]"),
+    "Humanoid": (376, 17, "1[sqrt(vx^2+vy^2) > 1.4149]"),  # centre of mass
+    "Swimmer": (8, 2, "1[vx > 0.2282]"),
+    "Walker2d": (17, 6, "1[vx > 2.3415]"),
+}
+
+
+def _family(task: str) -> str:
+    return task.rstrip("0123456789")
+
+
+def nav_id(robot: str, task: str) -> str:
+    """``("Point", "Goal1")`` → ``"SafetyPointGoal1-v0"``."""
+    return f"Safety{robot}{task}-v0"
+
+
+def velocity_id(robot: str) -> str:
+    return f"Safety{robot}Velocity-v1"
+
+
+def episode_steps(env_id: str) -> int:
+    """The task's episode length (safety_gymnasium's ``max_episode_steps`` for the id)."""
+    if env_id in _NAV_IDS:
+        return NAV_EPISODE_STEPS.get(_family(_NAV_IDS[env_id][1]), MAX_EPISODE_STEPS)
+    return MAX_EPISODE_STEPS
+
+
+def _nav(robot: str, task: str) -> TaskSpec:
+    env_id = nav_id(robot, task)
     return TaskSpec(
         id=env_id,
         factory=FACTORY,
         cost_limit=25.0,
         episode_cost_discount=1.0,
         preset=SAFETY_GYM,
-        obs_dim=obs_dim,
-        act_dim=2,
-        cost_source=f'safety_gymnasium info["cost"] in {{0,1}} ({hazards}), summed',
+        obs_dim=NAV_OBS_DIMS[task][list(NAV_ROBOTS).index(robot)],
+        act_dim=NAV_ROBOTS[robot],
+        cost_source=f'safety_gymnasium info["cost"] in {{0,1}} ({NAV_COSTS[task]}), summed',
         kwargs={"env_id": env_id},
-        overrides=overrides or {},
+        overrides=dict(NAV_OVERRIDES.get(_family(task), {})),
     )
 
 
-def _vel(env_id: str, obs_dim: int, act_dim: int, indicator: str) -> TaskSpec:
+def _vel(robot: str) -> TaskSpec:
+    env_id = velocity_id(robot)
+    obs_dim, act_dim, indicator = VELOCITY[robot]
     return TaskSpec(
         id=env_id,
         factory=FACTORY,
@@ -140,15 +244,12 @@ def _vel(env_id: str, obs_dim: int, act_dim: int, indicator: str) -> TaskSpec:
     )
 
 
+_NAV_IDS: dict[str, tuple[str, str]] = {
+    nav_id(robot, task): (robot, task) for task in NAV_OBS_DIMS for robot in NAV_ROBOTS
+}
 TASKS: tuple[TaskSpec, ...] = (
-    _nav("SafetyPointGoal1-v0", 60, "hazards"),
-    _nav("SafetyCarGoal1-v0", 72, "hazards"),
-    # Table 5: the Button tasks run T = 50 Langevin steps.
-    _nav("SafetyPointButton1-v0", 76, "hazards, gremlins, wrong buttons", {"langevin_steps": 50}),
-    _nav("SafetyCarButton1-v0", 88, "hazards, gremlins, wrong buttons", {"langevin_steps": 50}),
-    _vel("SafetyAntVelocity-v1", 27, 8, "1[sqrt(vx^2+vy^2) > 2.6222]"),
-    _vel("SafetySwimmerVelocity-v1", 8, 2, "1[vx > 0.2282]"),
-    _vel("SafetyHumanoidVelocity-v1", 376, 17, "1[sqrt(vx^2+vy^2) > 1.4149]"),
+    *(_nav(robot, task) for robot, task in _NAV_IDS.values()),
+    *(_vel(robot) for robot in VELOCITY),
 )
 _SAFETY_IDS = frozenset(t.id for t in TASKS)
 

@@ -7,7 +7,8 @@ edited: :func:`apply` fixes everything from here, once per process, and every en
 ours calls it before touching ``safety_gymnasium`` (RLlib env runners import the factory by
 string, so every process that builds an env gets the fixes).
 
-What :func:`apply` patches, and how narrowly (docs/dependencies.md, "Compatibility fixes", items 1-4):
+What :func:`apply` patches, and how narrowly (docs/dependencies.md, "Compatibility fixes", items 1-5;
+item 6 is documented in docs/tasks.md):
 
 1. **Renamed gymnasium wrapper modules** (``ModuleNotFoundError`` at import).
    ``safety_gymnasium`` imports ``gymnasium.wrappers.compatibility`` (``EnvCompatibility``),
@@ -59,6 +60,14 @@ bit-identical with and without :func:`apply`).
 5. **Offscreen rendering** (``TypeError`` in ``render``): gymnasium 1.x's ``OffScreenViewer``
    requires width/height that safety-gymnasium does not pass; they default to the model's
    offscreen buffer size (videos in ``sweeps/evaluate.py --video``).
+6. **Doggo and Ant robots, numpy >= 2.4** (``TypeError: only 0-dimensional arrays can be
+   converted to Python scalars`` at the first ``reset``): ``BaseAgent.obs_sensor`` does
+   ``float(self.get_sensor(name))`` on each hinge-angle sensor, a shape-(1,) array (Doggo and
+   Ant have such sensors; Point, Car and Racecar do not and built before). Fix: the name
+   ``float`` in ``safety_gymnasium.bases.base_agent``'s globals (that ``float(...)`` is the only
+   call of it in the module) is bound to :func:`_scalar_float`, which takes the single element
+   of a size-1 array, exactly what numpy < 2.4 did (same float64 value), and is the builtin
+   otherwise. Python's builtin ``float`` is untouched everywhere else.
 """
 
 from __future__ import annotations
@@ -277,6 +286,26 @@ def _patch_car_joint_ids() -> None:
     cls._init_jnt_sensors = _init_jnt_sensors
 
 
+# --------------------------------------------------------------------------- patch 6
+
+
+def _scalar_float(value: Any = 0.0) -> float:
+    """``float`` as numpy < 2.4 had it for arrays: a size-1 array gives its single element."""
+    if isinstance(value, np.ndarray) and value.size == 1:
+        value = value.reshape(-1)[0]
+    return float(value)
+
+
+_scalar_float._lac_rllib_patched = True  # type: ignore[attr-defined]
+
+
+def _patch_angle_sensor_float() -> None:
+    base_agent = importlib.import_module("safety_gymnasium.bases.base_agent")
+    if getattr(base_agent.__dict__.get("float"), "_lac_rllib_patched", False):
+        return
+    base_agent.float = _scalar_float  # shadows the builtin in that module only
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -374,6 +403,7 @@ def apply() -> types.ModuleType:
                 importlib.import_module(name)
         _patch_registration()
         _patch_car_joint_ids()
+        _patch_angle_sensor_float()
         _patch_offscreen_viewer()
         _reclaim_gym_ids()
         _STATE["module"] = sg

@@ -1,15 +1,19 @@
 """Safety-Gymnasium tasks: registration, 5-tuple form with info["cost"], seeding, costs."""
 
 import json
+import re
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
-from lac_rllib.tasks import get_task, known_tasks, safety_gym, safety_gym_compat
+from lac_rllib.tasks import TaskSpec, get_task, known_tasks, safety_gym, safety_gym_compat
+
+DOCS_TASKS = Path(__file__).resolve().parents[2] / "docs" / "tasks.md"
 
 NAV = {  # id: (obs, act)
     "SafetyPointGoal1-v0": (60, 2),
@@ -45,7 +49,7 @@ def test_specs():
         spec = get_task(task_id)
         assert (spec.obs_dim, spec.act_dim) == (obs, act)
         assert (spec.cost_limit, spec.episode_cost_discount, spec.preset) == (25, 1.0, "mujoco")
-    assert set(NAV) | set(VEL) == {t.id for t in safety_gym.TASKS}
+    assert set(NAV) | set(VEL) <= {t.id for t in safety_gym.TASKS}
     assert set(NAV) | set(VEL) <= set(known_tasks())
 
 
@@ -62,7 +66,7 @@ def _check_spaces_and_time_limit(env, spec):
     assert env.observation_space.dtype == np.float32
     assert env.action_space.shape == (spec.act_dim,) and env.action_space.dtype == np.float32
     limits = [w._max_episode_steps for w in _wrappers(env) if hasattr(w, "_max_episode_steps")]
-    assert limits == [1000]
+    assert limits == [safety_gym.episode_steps(spec.id)]
 
 
 @pytest.mark.parametrize("task_id", list(VEL))
@@ -226,3 +230,159 @@ def test_builds_in_a_fresh_process():
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out == {"shape": [88], "cost": out["cost"], "dtype": "float32", "n": 5}
     assert out["cost"] in (0.0, 1.0)
+
+
+# --------------------------------------------------------------------------- every task (issue 22)
+
+ROBOTS = ("Point", "Car", "Doggo", "Racecar", "Ant")
+NAV_FAMILIES = ("Goal", "Button", "Push", "Circle")
+VELOCITY_ROBOTS = ("Ant", "HalfCheetah", "Hopper", "Humanoid", "Swimmer", "Walker2d")
+ALL_NAV = [f"Safety{r}{f}{lvl}-v0" for f in NAV_FAMILIES for lvl in (0, 1, 2) for r in ROBOTS]
+ALL_NAV += [f"Safety{r}Run0-v0" for r in ROBOTS]
+ALL_VEL = [f"Safety{r}Velocity-v1" for r in VELOCITY_ROBOTS]
+
+
+def _safety_ids() -> set[str]:
+    return {t for t in known_tasks() if get_task(t).factory == safety_gym.FACTORY}
+
+
+def test_original_seven_task_specs_unchanged():
+    """Other code and evidence rely on these exact values."""
+    def nav(env_id, obs, hazards, overrides=None):
+        return TaskSpec(env_id, safety_gym.FACTORY, 25.0, 1.0, "safety_gym", obs, 2,
+                        f'safety_gymnasium info["cost"] in {{0,1}} ({hazards}), summed',
+                        {"env_id": env_id}, overrides or {})
+
+    def vel(env_id, obs, act, indicator):
+        return TaskSpec(env_id, safety_gym.FACTORY, 25.0, 1.0, "mujoco", obs, act,
+                        f"safety_gymnasium velocity v1 indicator {indicator}, summed", {"env_id": env_id})
+
+    button = "hazards, gremlins, wrong buttons"
+    expected = [
+        nav("SafetyPointGoal1-v0", 60, "hazards"),
+        nav("SafetyCarGoal1-v0", 72, "hazards"),
+        nav("SafetyPointButton1-v0", 76, button, {"langevin_steps": 50}),
+        nav("SafetyCarButton1-v0", 88, button, {"langevin_steps": 50}),
+        vel("SafetyAntVelocity-v1", 27, 8, "1[sqrt(vx^2+vy^2) > 2.6222]"),
+        vel("SafetySwimmerVelocity-v1", 8, 2, "1[vx > 0.2282]"),
+        vel("SafetyHumanoidVelocity-v1", 376, 17, "1[sqrt(vx^2+vy^2) > 1.4149]"),
+    ]
+    for spec in expected:
+        assert get_task(spec.id) == spec
+
+
+def test_every_navigation_and_velocity_task_is_registered():
+    assert _safety_ids() == set(ALL_NAV) | set(ALL_VEL)
+    assert len(ALL_NAV) == 65 and len(ALL_VEL) == 6
+    for task_id in ALL_NAV + ALL_VEL:
+        spec = get_task(task_id)
+        nav = task_id in ALL_NAV
+        assert (spec.cost_limit, spec.episode_cost_discount) == (25.0, 1.0)
+        assert spec.preset == ("safety_gym" if nav else "mujoco")
+        assert spec.kwargs == {"env_id": task_id}
+        assert spec.overrides == ({"langevin_steps": 50} if "Button" in task_id else {})
+        assert spec.cost_source.startswith("safety_gymnasium ")
+        assert ("always 0" in spec.cost_source) == bool(re.search(r"(Goal|Button|Push|Circle)0-", task_id))
+        assert safety_gym.episode_steps(task_id) == (500 if re.search(r"(Circle|Run)\d", task_id) else 1000)
+
+
+def _sampled_ids() -> list[str]:
+    """One id per (robot, navigation family), the level rotating so that every level of every
+    family is sampled by some robot; plus every velocity task."""
+    ids = [f"Safety{r}{f}{(i + j) % 3}-v0" for j, f in enumerate(NAV_FAMILIES) for i, r in enumerate(ROBOTS)]
+    return ids + [f"Safety{r}Run0-v0" for r in ROBOTS] + ALL_VEL
+
+
+def test_sample_covers_every_family_and_level():
+    split = [re.fullmatch(r"Safety(Point|Car|Doggo|Racecar|Ant)(\w+\d)-v0", t) for t in _sampled_ids()]
+    sampled = [m.groups() for m in split if m]
+    assert {task for _, task in sampled} == {f"{f}{lvl}" for f in NAV_FAMILIES for lvl in (0, 1, 2)} | {"Run0"}
+    assert {robot for robot, _ in sampled} == set(ROBOTS)
+    assert len(sampled) == len(set(sampled)) == 25
+
+
+@pytest.mark.parametrize("task_id", _sampled_ids())
+def test_table_matches_the_env(task_id):
+    """The registry's obs/act sizes and episode length (a table, so that importing the registry
+    stays cheap) are what the env reports; safety_gymnasium's own episode length agrees."""
+    spec = get_task(task_id)
+    env = spec.make()
+    _check_spaces_and_time_limit(env, spec)
+    assert safety_gym_compat.safety_spec(task_id).max_episode_steps == safety_gym.episode_steps(task_id)
+    if task_id in ALL_NAV:
+        assert env.unwrapped.task.num_steps == safety_gym.episode_steps(task_id)
+    obs, _ = env.reset(seed=0)
+    assert obs.dtype == np.float32 and obs.shape == (spec.obs_dim,)
+    env.action_space.seed(0)
+    for _ in range(5):
+        obs, _, _, _, info = env.step(env.action_space.sample())
+        assert obs.shape == (spec.obs_dim,) and isinstance(info["cost"], float)
+        assert info["cost"] in (0.0, 1.0)
+
+
+def _docs_rows() -> dict[str, list[str]]:
+    rows = {}
+    for line in DOCS_TASKS.read_text(encoding="utf-8").splitlines():
+        if m := re.match(r"\| `(Safety[^`]+)` \|", line):
+            cells = [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
+            assert m.group(1) not in rows, f"{m.group(1)} listed twice"
+            rows[m.group(1)] = cells
+    return rows
+
+
+def test_docs_tasks_md_lists_exactly_the_registered_ids():
+    rows = _docs_rows()
+    assert set(rows) == _safety_ids()
+    for task_id, (_id, _family, robot, _level, obs, act, steps, limit, preset, _cost) in rows.items():
+        spec = get_task(task_id)
+        assert robot in task_id
+        assert (int(obs), int(act), int(steps)) == (spec.obs_dim, spec.act_dim, safety_gym.episode_steps(task_id))
+        assert float(limit) == spec.cost_limit
+        assert preset.split("`")[1] == spec.preset
+        assert ("T = 50" in preset) == ("langevin_steps" in spec.overrides)
+
+
+def test_new_navigation_tasks_step_and_cost():
+    """Two ids beyond the original seven: cost 1 on a hazard (Goal2) and outside the walls
+    (Circle1), 0 back at the start; Circle1 ends after 500 steps."""
+    for task_id, target in (("SafetyPointGoal2-v0", "hazard"), ("SafetyCarCircle1-v0", (2.0, 0.0))):
+        env = get_task(task_id).make()
+        builder = env.unwrapped
+        obs, _ = env.reset(seed=4)
+        start = builder.task.data.body("agent").xpos[:2].copy()
+        costs = []
+        for step in range(20):
+            if step == 5:
+                xy = builder.task.data.body("hazard0").xpos[:2] if target == "hazard" else target
+                _teleport_agent(builder, xy)
+            elif step == 12:
+                _teleport_agent(builder, start)
+            obs, _, term, trunc, info = env.step(np.zeros(2, np.float32))
+            assert isinstance(info["cost"], float) and obs.shape == (get_task(task_id).obs_dim,)
+            costs.append(info["cost"])
+            assert not (term or trunc)
+        assert costs[5] == 1.0 and costs[12:] == [0.0] * 8 and costs[:5] == [0.0] * 5
+    n = 20
+    while not (trunc or term):
+        _, _, term, trunc, _ = env.step(np.zeros(2, np.float32))
+        n += 1
+    assert (n, trunc, term) == (500, True, False)
+
+
+def test_doggo_and_ant_robots_build_with_the_angle_sensor_fix():
+    """Fix 6: float() of their shape-(1,) hinge-angle sensors, numpy >= 2.4."""
+    import builtins
+
+    safety_gym_compat.apply()
+    base_agent = sys.modules["safety_gymnasium.bases.base_agent"]
+    assert base_agent.float is safety_gym_compat._scalar_float and builtins.float is float
+    assert safety_gym_compat._scalar_float(np.array([0.25])) == 0.25
+    assert safety_gym_compat._scalar_float("2") == 2.0
+    with pytest.raises(TypeError):
+        safety_gym_compat._scalar_float(np.zeros(2))
+    safety_gym_compat.apply()
+    assert base_agent.float is safety_gym_compat._scalar_float  # idempotent
+    for task_id in ("SafetyDoggoGoal1-v0", "SafetyAntButton1-v0"):
+        env = get_task(task_id).make()
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == (get_task(task_id).obs_dim,) and np.all(np.isfinite(obs))
