@@ -109,8 +109,12 @@ def config_markdown() -> str:
             "(1 = a plain sum).",
             "", "| task | preset | overrides | cost per step | cost limit | episode cost discount |",
             "|---|---|---|---|---|---|"]
+    from lac_rllib.tasks.user import FACTORY as USER_FACTORY
+
     for task_id in known_tasks():
         t = get_task(task_id)
+        if t.factory == USER_FACTORY:  # a user's env registered in this process is not a built-in task
+            continue
         overrides = ", ".join(f"`{k}={v!r}`" for k, v in t.overrides.items())
         out.append(f"| `{t.id}` | `{t.preset}` | {overrides} | {_cell(t.cost_source)} | {t.cost_limit:g} "
                    f"| {t.episode_cost_discount:g} |")

@@ -245,10 +245,13 @@ def restore_policy(checkpoint_path: str) -> Policy:
         DEFAULT_MODULE_ID,
     )
 
-    from lac_rllib.tasks import get_task
+    from lac_rllib.tasks import get_task, known_tasks
+    from lac_rllib.tasks.user import register_definition
 
     ckpt = find_checkpoint_dir(checkpoint_path)
     meta = read_metadata(ckpt)
+    if meta.get("task_definition") and meta["task_id"] not in known_tasks():
+        register_definition(meta["task_definition"])  # a user's env: its spec is in the checkpoint
     try:
         get_task(meta["task_id"])
     except ValueError as e:

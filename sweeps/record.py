@@ -1,29 +1,51 @@
-"""A sweep's record on disk (``sweep.json`` in its Tune directory): its parent run, its plan and the
-arguments that define it, so ``--resume`` continues the same sweep and refuses another one.
+"""A sweep's record on disk, in its Tune directory: ``sweep.yaml`` (the resolved sweep, a file that
+reruns it) and ``sweep.json`` (its parent run and plan), so ``--resume`` continues the same sweep
+and refuses another one.
 
 Kept apart from ``sweeps/sweep.py`` so the CLI can judge a resume before Ray is imported.
 """
 
 from __future__ import annotations
 
-#: What a sweep is: --resume must be given the same values (the trials keep the settings they
-#: started with, so a changed one would silently mix two sweeps).
-IDENTITY_ARGS = ("space", "task", "budget", "seeds", "num_samples", "scheduler", "optuna_seed", "set", "experiment")
-IDENTITY_PLAN = ("tracking_uri", "timesteps", "n_trials", "optuna_storage")
+import json
+from pathlib import Path
+
+import yaml
+
 SWEEP_FILE = "sweep.json"
+SWEEP_YAML = "sweep.yaml"
+#: Settings of the resolved sweep a resume may change: they change how fast it goes, not what it runs.
+SPEED_KEYS = ("max_concurrent", "cpus_per_trial", "description")
+#: What a sweep is beyond its file: --resume must be given the same values.
+IDENTITY_PLAN = ("tracking_uri", "timesteps", "n_trials", "optuna_storage")
+IDENTITY_INFRA = ("optuna_seed",)
 
 
-def sweep_record(plan, args, parent: str) -> dict:
-    """What ``sweep.json`` holds: the parent run, the plan and the arguments that define the sweep."""
+def sweep_record(plan, parent: str) -> dict:
+    """What ``sweep.json`` holds: the parent run, the plan and the settings beyond the sweep file."""
     return {"parent_run_id": parent, "plan": plan.record(),
-            "args": {k: getattr(args, k) for k in IDENTITY_ARGS}}
+            "infra": {k: getattr(plan.infra, k) for k in IDENTITY_INFRA}}
 
 
-def resume_differences(record: dict, plan, args) -> list[str]:
-    """``name=old (now new)`` for every defining setting that differs from the recorded sweep."""
-    old_args, old_plan = record.get("args", {}), record.get("plan", {})
-    diff = [f"--{k.replace('_', '-')}={old_args[k]!r} (now {getattr(args, k)!r})"
-            for k in IDENTITY_ARGS if k in old_args and old_args[k] != getattr(args, k)]
-    diff += [f"{k}={old_plan[k]!r} (now {getattr(plan, k)!r})"
-             for k in IDENTITY_PLAN if k in old_plan and old_plan[k] != getattr(plan, k)]
+def write_record(sweep_dir: Path, plan, parent: str) -> None:
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    (sweep_dir / SWEEP_YAML).write_text(plan.sweep.dump())
+    (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, parent), default=str))
+
+
+def resume_differences(sweep_dir: Path, plan) -> list[str]:
+    """``key=old (now new)`` for every defining setting that differs from the recorded sweep."""
+    record = json.loads((sweep_dir / SWEEP_FILE).read_text())
+    diff = []
+    if (sweep_dir / SWEEP_YAML).exists():
+        old = yaml.safe_load((sweep_dir / SWEEP_YAML).read_text()) or {}
+        new = yaml.safe_load(plan.sweep.dump())
+        for key in sorted(set(old) | set(new)):
+            if key not in SPEED_KEYS and old.get(key) != new.get(key):
+                diff.append(f"{key}={old.get(key)!r} (now {new.get(key)!r})")
+    old_plan, old_infra = record.get("plan", {}), record.get("infra", {})
+    now = plan.record()
+    diff += [f"{k}={old_plan[k]!r} (now {now[k]!r})" for k in IDENTITY_PLAN if k in old_plan and old_plan[k] != now[k]]
+    diff += [f"--{k.replace('_', '-')}={old_infra[k]!r} (now {getattr(plan.infra, k)!r})"
+             for k in IDENTITY_INFRA if k in old_infra and old_infra[k] != getattr(plan.infra, k)]
     return diff

@@ -8,7 +8,8 @@ sweep, one child run per trial; the Tune experiment lives in ``--storage``/``--n
 from __future__ import annotations
 
 import argparse
-import json
+import ast
+import dataclasses
 import logging
 import os
 import socket
@@ -16,10 +17,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sweeps import spaces
+from pydantic import ValidationError
+
+from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, check_algo
+from sweeps import spaces, sweep_file
 from sweeps.lock import DriverLock, SweepLocked
-from sweeps.plan import Plan
+from sweeps.plan import Infra, Plan
 from sweeps.record import SWEEP_FILE, resume_differences
+from sweeps.sweep_file import SweepFile
 from sweeps.tracking import check_reachable, default_tracking_uri
 
 # The plan's estimate, per preset: env steps per second of one trial on 1 CPU without the chain,
@@ -31,32 +36,63 @@ STARTUP_S = 15.0
 UPDATE_S_PER_STEP = {"ppo_lag": 2e-4, "sac_lag": 2e-3}
 
 
+def _int_at_least(low: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low:
+            raise argparse.ArgumentTypeError(f"{text} is invalid; accepted: an integer >= {low}")
+        return value
+    return parse
+
+
+def _budget(text: str) -> str | int:
+    if text.isdigit() and int(text) > 0:
+        return int(text)
+    if text in spaces.BUDGETS:
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r} is invalid; accepted: {' | '.join(spaces.BUDGETS)} or env steps "
+                                     "(an integer > 0)")
+
+
 def parse_args(argv=None) -> argparse.Namespace:
+    """The command line. A flag left out is None: the sweep file (or its default) decides."""
     p = argparse.ArgumentParser(prog="sweeps/run.py", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--space", required=True, choices=spaces.SPACES, help="which search space")
-    p.add_argument("--task", default=None, help=f"task id (default {spaces.DEFAULT_TASK}; smoke: {spaces.SMOKE_TASK}; "
-                                                 "paper: all paper tasks)")
-    p.add_argument("--budget", default="quick", choices=list(spaces.BUDGETS),
-                   help="; ".join(f"{k}: {b.describe()}" for k, b in spaces.BUDGETS.items()))
-    p.add_argument("--seeds", type=int, default=3, help="seeds per configuration (search: per Optuna sample)")
-    p.add_argument("--num-samples", type=int, default=20, help="Optuna samples, i.e. configurations (search space)")
-    p.add_argument("--max-concurrent", type=int, default=None, help="trials at once (default: CPUs / cpus-per-trial)")
-    p.add_argument("--cpus-per-trial", type=int, default=1,
-                   help="CPUs per trial: as many env runners sample and as many torch threads update")
-    p.add_argument("--scheduler", choices=("none", "asha"), default="none")
-    p.add_argument("--address", default=None, help="Ray cluster address (host:port or auto); default: local Ray")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--space", choices=sweep_file.builtin_spaces(),
+                      help="a built-in sweep (its file is in sweeps/builtin/)")
+    what.add_argument("--config", metavar="FILE.yaml", help="a sweep file (reference: docs/sweeps.md)")
+    p.add_argument("--task", default=None,
+                   help=f"task id (docs/tasks.md; default: the file's, else {spaces.DEFAULT_TASK})")
+    p.add_argument("--budget", type=_budget, default=None,
+                   help="; ".join(f"{k}: {b.describe()}" for k, b in spaces.BUDGETS.items()) + "; or env steps N")
+    p.add_argument("--seeds", type=_int_at_least(1), default=None,
+                   help="seeds per configuration (search: per sampled configuration; default 3)")
+    p.add_argument("--seed-start", type=_int_at_least(0), default=None,
+                   help="the first seed (default 0): confirmation runs use seeds no search saw")
+    p.add_argument("--num-samples", type=_int_at_least(1), default=None,
+                   help="configurations a search samples (default 20)")
+    p.add_argument("--max-concurrent", type=_int_at_least(1), default=None,
+                   help="trials at once (default: CPUs / cpus-per-trial)")
+    p.add_argument("--cpus-per-trial", type=_int_at_least(1), default=None,
+                   help="CPUs per trial: as many env runners sample and as many torch threads update (default 1)")
+    p.add_argument("--scheduler", choices=("none", "asha"), default=None)
+    p.add_argument("--address", default=None,
+                   help="Ray cluster address (host:port or auto; default: $RAY_ADDRESS, else local Ray)")
     p.add_argument("--tracking-uri", default=None,
                    help="MLflow tracking URI (default: sqlite store in the working dir)")
-    p.add_argument("--experiment", default="lac-sweeps", help="MLflow experiment name")
+    p.add_argument("--experiment", default=None, help="MLflow experiment name (default lac-sweeps)")
     p.add_argument("--storage", default="ray_results",
                    help="Tune storage path (on a cluster: an absolute path every node mounts)")
-    p.add_argument("--name", default=None, help="sweep name (default: space-task-budget); --resume finds it by name")
+    p.add_argument("--name", default=None, help="sweep name (default: FILE-TASK-BUDGET); --resume finds it by name")
     p.add_argument("--resume", action="store_true", help="continue the sweep of the same name")
-    p.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial (node loss)")
-    p.add_argument("--optuna-seed", type=int, default=0, help="seed of the TPE sampler")
+    p.add_argument("--max-failures", type=_int_at_least(0), default=2, help="retries of a failed trial (node loss)")
+    p.add_argument("--optuna-seed", type=int, default=0, help="seed of the search's sampler")
     p.add_argument("--optuna-storage", default=None,
-                   help="Optuna storage URL of the search space's study (default: optuna.db beside a local MLflow "
+                   help="Optuna storage URL of a search's study (default: optuna.db beside a local MLflow "
                         "store, else in --storage); open it with optuna-dashboard URL")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
@@ -64,17 +100,19 @@ def parse_args(argv=None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def check_address(address: str | None) -> None:
+def check_address(address: str | None, source: str | None = "--address") -> None:
+    """``source`` says where the address came from: ``--address``, or ``RAY_ADDRESS`` (what
+    ``ray job submit`` sets for the driver it starts)."""
     if address in (None, "auto", "local"):
         return
     hostport = address.split("://", 1)[-1]
     host, _, port = hostport.rpartition(":")
     if not host or not port.isdigit():
-        raise ValueError(f"--address {address!r}: accepted: auto, HOST:PORT or ray://HOST:PORT")
+        raise ValueError(f"{source} {address!r}: accepted: auto, HOST:PORT or ray://HOST:PORT")
     try:
         socket.create_connection((host, int(port)), timeout=5).close()
     except OSError as e:
-        raise ValueError(f"--address {address}: cannot connect ({e}); is `ray start --head` running there?") from None
+        raise ValueError(f"{source} {address}: cannot connect ({e}); is `ray start --head` running there?") from None
 
 
 def check_storage(storage: str) -> None:
@@ -101,89 +139,184 @@ def check_storage(storage: str) -> None:
                 pass
 
 
-def check_shared(uri: str, storage: str) -> None:
+def check_shared(uri: str, storage: str, source: str | None = "--address") -> None:
     """On a cluster every trial runs on some node: the tracking store and the storage path must
     be the same place for all of them, not one local copy per node."""
     if uri.startswith(("sqlite:", "file:")) or "://" not in uri:
-        raise ValueError(f"--tracking-uri {uri} with --address: each node would write its own local store; "
+        raise ValueError(f"--tracking-uri {uri} with {source}: each node would write its own local store; "
                          "accepted: http(s)://HOST:PORT of an mlflow server every node reaches (docker/README.md)")
     if not storage.startswith("file://") and not os.path.isabs(storage):
-        raise ValueError(f"--storage {storage} with --address: a relative path is a different directory on every "
+        raise ValueError(f"--storage {storage} with {source}: a relative path is a different directory on every "
                          "node; accepted: an absolute path every node mounts at the same place")
 
 
 def make_plan(args) -> Plan:
-    spaces.validate(args.space, args.task, args.budget, args.seeds)
-    for flag in ("num_samples", "cpus_per_trial", "max_concurrent"):
-        v = getattr(args, flag)
-        if v is not None and v < 1:
-            raise ValueError(f"--{flag.replace('_', '-')} {v} is invalid; accepted: an integer >= 1")
-    sets = parse_trial_sets(args.space, args.set)
-    if not args.address and args.cpus_per_trial > (os.cpu_count() or 1):
+    """The one pass from the command line to the trials: file and flags → the resolved sweep
+    (:func:`resolve_sweep`) → its trials with their full configs (``spaces.trial_params``) → the
+    estimate and where it goes. Every input is checked here, before Ray starts."""
+    sweep, space = resolve_sweep(args)
+    address = args.address or os.environ.get("RAY_ADDRESS") or None
+    infra = Infra(address=address, address_from="--address" if args.address else "RAY_ADDRESS" if address else None,
+                  tracking_uri=args.tracking_uri or default_tracking_uri(), storage=args.storage,
+                  resume=args.resume, max_failures=args.max_failures, optuna_seed=args.optuna_seed)
+    cpus = sweep.cpus_per_trial
+    if not address and cpus > (os.cpu_count() or 1):
         # Tune would keep such a trial PENDING forever on the local Ray this command starts.
-        raise ValueError(f"--cpus-per-trial {args.cpus_per_trial} is more than this machine's "
-                         f"{os.cpu_count()} CPUs; accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
-    check_address(args.address)
-    uri = args.tracking_uri or default_tracking_uri()
+        raise ValueError(f"--cpus-per-trial {cpus} is more than this machine's {os.cpu_count()} CPUs; "
+                         f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
+    check_address(address, infra.address_from)
     check_storage(args.storage)
-    if args.address not in (None, "local"):
-        check_shared(uri, args.storage)
-    check_reachable(uri)
-    task = spaces.default_task(args.space, args.task)
-    budget = spaces.BUDGETS[args.budget]
-    # Every grid trial's LAC fields, resolved once, here (spaces.trial_params: preset < task <
-    # budget < --set < swept value); a search sample is resolved in its trial the same way.
-    trials = (spaces.resolve_trials(spaces.grid(args.space, task, args.seeds, args.budget), args.budget, sets)
-              if args.space != "search" else None)
+    if address not in (None, "local"):
+        check_shared(infra.tracking_uri, args.storage, infra.address_from)
+    check_reachable(infra.tracking_uri)
+    # A user's env module is looked up on the Python path, then beside the sweep file, then here.
+    search_dirs = ((str(Path(args.config).resolve().parent),) if args.config else ()) + (os.getcwd(),)
+    tasks, user_tasks = resolve_tasks(sweep, search_dirs)
+    sets = trial_sets(sweep)
+    trials = None
+    if not sweep.is_search:
+        trials = spaces.resolve_trials(spaces.expand(sweep, tasks), sweep.budget, sets)
     from lac_rllib.constrained.cpus import check_cpus
 
-    for params in [t.params for t in trials] if trials else [spaces.trial_params(task, args.budget, sets)]:
-        check_cpus(params.get("num_envs_per_env_runner", 1), args.cpus_per_trial, "--cpus-per-trial")
-    # search: each Optuna sample is trained with every seed (sweeps/sweep.py, SeedRepeater)
-    n_trials = len(trials) if trials is not None else args.num_samples * args.seeds
-    concurrency = min(args.max_concurrent or max(1, (os.cpu_count() or 1) // args.cpus_per_trial), n_trials)
     # A search is estimated at the fields it runs before Optuna's samples (the sampled T is not known yet).
-    per_trial = ([estimate_trial_s(t.task, budget.for_task(t.task)[0], t.params, args.cpus_per_trial)
-                  for t in trials] if trials else
-                 [estimate_trial_s(task, budget.for_task(task)[0], spaces.trial_params(task, args.budget, sets),
-                                   args.cpus_per_trial)] * n_trials)
-    (timesteps,) = {budget.for_task(t.task)[0] for t in trials} if trials else {budget.for_task(task)[0]}
-    name = args.name or f"{args.space}-{(task or 'paper').split('/')[-1]}-{args.budget}"
+    first = trials or [dataclasses.replace(spaces.trial_spec(
+        {"task": tasks[0], "budget": sweep.budget, "sets": sets, "overrides": {}}), seed=0)]
+    for t in first:
+        check_cpus(t.params.get("num_envs_per_env_runner", 1), cpus, "--cpus-per-trial")
+    seeds = sweep.seed_list()
+    # search: each sampled configuration is trained with every seed (sweeps/sweep.py, SeedRepeater)
+    n_trials = len(trials) if trials is not None else sweep.num_samples * len(seeds)
+    concurrency = min(sweep.max_concurrent or max(1, (os.cpu_count() or 1) // cpus), n_trials)
+    per_trial = [estimate_trial_s(t.task, t.timesteps, t.params, cpus) for t in trials or first * n_trials]
+    name = sweep.name
     optuna_storage = None
-    if args.space == "search":
-        optuna_storage = args.optuna_storage or default_optuna_storage(uri, args.storage)
+    if sweep.is_search:
+        optuna_storage = args.optuna_storage or default_optuna_storage(infra.tracking_uri, args.storage)
         check_optuna_study(optuna_storage, name, args.resume)
     return Plan(
-        space=args.space, task=task, budget=args.budget, timesteps=timesteps, trials=trials, n_trials=n_trials,
-        concurrency=concurrency, sets=sets, estimated_wall_s=estimate_wall_s(per_trial, concurrency),
-        estimated_cpu_h=sum(per_trial) * args.cpus_per_trial / 3600, tracking_uri=uri, experiment=args.experiment,
+        sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
+        n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=max(t.timesteps for t in first),
+        estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
         name=name, storage=str(Path(args.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
     )
 
 
-def parse_trial_sets(space: str, pairs: list[str]) -> dict:
-    """``--set FIELD=VALUE`` as the fields every trial sets, checked against each algorithm the
-    sweep runs (``--set algo=NAME`` picks one; the compare space runs them all)."""
-    from lac_rllib.algorithms import registry
-
-    algo_pairs = [p for p in pairs if p.partition("=")[0].strip() == registry.ALGO_FIELD]
-    field_pairs = [p for p in pairs if p not in algo_pairs]
-    sets = {}
+def resolve_sweep(args) -> tuple[SweepFile, str]:
+    """The sweep file (``--config``, or the built-in ``--space``) with the flags and the defaults
+    applied, checked again as a whole: the sweep every later step reads, and ``sweep.yaml``.
+    Returns it and the sweep's kind (the built-in space or the file's stem)."""
+    path = Path(args.config) if args.config else sweep_file.builtin_path(args.space)
+    base = sweep_file.load(path)
+    space = args.space or path.stem
+    data = base.model_dump(exclude_none=True)
+    if args.task:
+        data["task"] = [args.task]
+    if args.budget is not None:
+        data["budget"] = args.budget
+    if args.seeds is not None or args.seed_start is not None:
+        old = base.seed_list()
+        data["seeds"] = {"count": args.seeds or len(old),
+                         "start": args.seed_start if args.seed_start is not None else old[0]}
+    algo_pairs = [p for p in args.set if p.partition("=")[0].strip() == ALGO_FIELD]
+    cli_sets = parse_set_pairs([p for p in args.set if p not in algo_pairs])
     if algo_pairs:
-        if space == "compare":
-            raise ValueError(f"--set {algo_pairs[-1]} with --space compare: the space runs every algorithm "
-                             f"({', '.join(spaces.COMPARE_ALGOS)}); accepted: --set of fields they share")
-        sets[registry.ALGO_FIELD] = registry.check_algo(algo_pairs[-1].partition("=")[2].strip())
-    algos = spaces.COMPARE_ALGOS if space == "compare" else (sets.get(registry.ALGO_FIELD, registry.DEFAULT_ALGO),)
-    if space in ("search", "ablation", "smoke") and algos != ("lac",):
-        raise ValueError(f"--space {space} sweeps LAC's own fields (T, eta, lambda, beta); --set algo={algos[0]} is "
-                         "not LAC; accepted for a baseline: --space paper or --space compare")
-    for algo in algos:
-        fields = registry.parse_sets(algo, field_pairs)  # a field another algorithm owns is named as such
-        for name, value in fields.items():
-            registry.algo_config(algo).FIELDS.check(name, value)
-        sets.update(fields)
+        algo = check_algo(algo_pairs[-1].partition("=")[2].strip())
+        if sweeps_algo(base):
+            raise ValueError(f"--set {algo_pairs[-1]}: {path.name} sweeps algo itself ({list(swept_algos(base))}); "
+                             "accepted: --set of fields every algorithm it runs has")
+        data["algo"] = [algo]
+    data["set"] = {**data.get("set", {}), **cli_sets}
+    for key in ("num_samples", "scheduler", "max_concurrent", "cpus_per_trial", "experiment"):
+        if getattr(args, key) is not None:
+            data[key] = getattr(args, key)
+    data.setdefault("task", [spaces.DEFAULT_TASK])
+    data.setdefault("budget", "quick")
+    data.setdefault("seeds", {"count": 3, "start": 0})
+    data.setdefault("searcher", "tpe" if base.is_search else "grid")
+    data.setdefault("scheduler", "none")
+    data.setdefault("cpus_per_trial", 1)
+    data.setdefault("experiment", "lac-sweeps")
+    if base.is_search:
+        data.setdefault("num_samples", 20)
+    elif "groups" not in data:  # the file's one group (or one configuration), named after the file
+        data["groups"] = {space: {"grid": data.pop("grid", {})}} if data.get("grid") else {space: {}}
+    try:
+        sweep = SweepFile.model_validate(data)
+        sweep_file.check_fields(sweep)
+    except sweep_file.FieldError as e:
+        flag = e.loc[0] == "set" and len(e.loc) > 1 and e.loc[1] in cli_sets
+        raise ValueError(f"--set {e.loc[1]}: {e.message}" if flag else
+                         f"{path}: {sweep_file._dotted(e.loc)}: {e.message}") from None
+    except ValidationError as e:  # a flag's value the file's schema refuses
+        err = e.errors()[0]
+        raise ValueError(f"{path} with the flags: {sweep_file._dotted(err['loc'])}: "
+                         f"{err['msg'].removeprefix('Value error, ')}") from None
+    if args.name or not sweep.name:
+        tasks = sweep.task
+        what = (tasks[0] if isinstance(tasks[0], str) else tasks[0].task_id()).split("/")[-1] \
+            if len(tasks) == 1 else f"{len(tasks)}-tasks"
+        sweep = sweep.model_copy(update={"name": args.name or f"{space}-{what}-{sweep.budget}"})
+    return sweep, space
+
+
+def parse_set_pairs(pairs: list[str]) -> dict:
+    """``--set FIELD=VALUE`` pairs as values (Python literals, else the text); their names and
+    values are checked with the sweep's fields (``sweep_file.check_fields``)."""
+    out = {}
+    for pair in pairs:
+        name, sep, raw = pair.partition("=")
+        if not sep or not name.strip():
+            raise ValueError(f"--set {pair!r}: expected FIELD=VALUE")
+        try:
+            out[name.strip()] = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            out[name.strip()] = raw  # plain strings such as informative / next
+    return out
+
+
+def swept_algos(sweep: SweepFile) -> tuple:
+    groups = [*(sweep.groups or {}).values(), *(g for at in sweep.groups_at for g in at.groups.values())]
+    found = [v for g in groups for v in g.grid.get(ALGO_FIELD, ())]
+    if sweep.search and ALGO_FIELD in sweep.search:
+        found += list(sweep.search[ALGO_FIELD].values_to_check())
+    if sweep.grid and ALGO_FIELD in sweep.grid:
+        found += list(sweep.grid[ALGO_FIELD])
+    return tuple(dict.fromkeys(found))
+
+
+def sweeps_algo(sweep: SweepFile) -> bool:
+    return bool(swept_algos(sweep)) or len(sweep.algo) > 1
+
+
+def trial_sets(sweep: SweepFile) -> dict:
+    """What every trial sets: the sweep's ``set``, and its algorithm when it runs one baseline."""
+    sets = {k: sweep_file.to_field_value(v) for k, v in sweep.set.items()}
+    if len(sweep.algo) == 1 and sweep.algo[0] != DEFAULT_ALGO:
+        sets[ALGO_FIELD] = sweep.algo[0]
     return sets
+
+
+def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> tuple[list[str], dict]:
+    """The sweep's task ids, every one known here; a user's env is built once and stepped first
+    (lac_rllib/tasks/user.py), its definition returned to travel with the trials."""
+    from lac_rllib.tasks import get_task
+    from lac_rllib.tasks.user import definition, user_task
+
+    ids, user = [], {}
+    for i, task in enumerate(sweep.task):
+        if isinstance(task, str):
+            get_task(task)  # unknown id -> ValueError listing the known ones
+            ids.append(task)
+            continue
+        try:
+            spec = user_task(task.task_id(), factory=task.factory, gym_id=task.id, cost_limit=task.cost_limit,
+                             episode_cost_discount=task.episode_cost_discount, cost_key=task.cost_key,
+                             preset=task.preset, kwargs=task.kwargs, search_dirs=search_dirs)
+        except ValueError as e:
+            raise ValueError(f"task[{i}]: {e}") from None
+        ids.append(spec.id)
+        user[spec.id] = definition(spec)
+    return ids, user
 
 
 def default_optuna_storage(tracking_uri: str, storage: str) -> str:
@@ -241,24 +374,31 @@ def estimate_wall_s(per_trial: list[float], concurrency: int) -> float:
     return max(slots)
 
 
-def print_plan(plan: Plan, args) -> None:
-    print(f"LAC sweep '{plan.name}': space={plan.space} task={plan.task or 'all paper tasks'} "
-          f"budget={plan.budget}")
-    what = f"{args.num_samples} Optuna TPE samples x " if plan.trials is None else ""
-    print(f"  trials: {plan.n_trials}  ({what}{args.seeds} seed(s) per configuration)")
+def print_plan(plan: Plan) -> None:
+    sweep, infra = plan.sweep, plan.infra
+    tasks = ", ".join(plan.tasks) if len(plan.tasks) <= 3 else f"{len(plan.tasks)} tasks ({plan.tasks[0]}, ...)"
+    print(f"sweep '{plan.name}': {plan.space} ({', '.join(plan.swept_algos or sweep.algo)})  "
+          f"task {tasks}  budget {sweep.budget}")
+    if sweep.description:
+        print(f"  {sweep.description}")
+    seeds = plan.seeds
+    contiguous = seeds == tuple(range(seeds[0], seeds[-1] + 1))
+    seed_text = f"seeds {seeds[0]}..{seeds[-1]}" if contiguous else f"seeds {list(seeds)}"
+    what = f"{sweep.num_samples} Optuna {sweep.searcher.upper()} samples x " if sweep.is_search else ""
+    print(f"  trials: {plan.n_trials}  ({what}{len(seeds)} seed(s) per configuration: {seed_text})")
     print(f"  env steps per trial: {plan.timesteps:,}   "
-          f"concurrency: {plan.concurrency} x {args.cpus_per_trial} CPU"
-          f"{'' if not args.address else ' (cluster: capped by its CPUs)'}")
+          f"concurrency: {plan.concurrency} x {sweep.cpus_per_trial} CPU"
+          f"{'' if not infra.address else f' (cluster {infra.address} from {infra.address_from}: capped by its CPUs)'}")
     print(f"  estimated wall time: ~{plan.estimated_wall_s / 60:.0f} min, "
           f"{plan.estimated_cpu_h:.1f} CPU-hours (rough)")
-    if plan.estimated_wall_s > 4 * 3600 and not args.address:
+    if plan.estimated_wall_s > 4 * 3600 and not infra.address:
         print("  too long for one machine? the same command runs on a Ray cluster: --address HEAD:PORT "
               "(set-up: docker/README.md)")
-    print(f"  MLflow: {plan.tracking_uri}  experiment '{plan.experiment}'")
-    print(f"  Tune results: {plan.storage}/{plan.name}{'  (resuming)' if args.resume else ''}")
+    print(f"  MLflow: {infra.tracking_uri}  experiment '{sweep.experiment}'")
+    print(f"  Tune results: {plan.storage}/{plan.name}{'  (resuming)' if infra.resume else ''}")
     if plan.optuna_storage:
         print(f"  Optuna study '{plan.name}': {plan.optuna_storage}  (optuna-dashboard {plan.optuna_storage})")
-    print(f"  browse: mlflow ui --backend-store-uri {plan.tracking_uri}", flush=True)
+    print(f"  browse: mlflow ui --backend-store-uri {infra.tracking_uri}", flush=True)
 
 
 def git_commit() -> str:
@@ -280,7 +420,7 @@ def main(argv=None) -> int:
         if args.resume and not (sweep_dir / SWEEP_FILE).exists():
             raise ValueError(f"--resume: no sweep named {plan.name!r} under {plan.storage}")
         if args.resume:
-            diff = resume_differences(json.loads((sweep_dir / SWEEP_FILE).read_text()), plan, args)
+            diff = resume_differences(sweep_dir, plan)
             if diff:
                 raise ValueError(f"--resume: sweep {plan.name!r} was started with other settings: "
                                  f"{'; '.join(diff)}. Resume with the original ones, or start a new --name")
@@ -303,10 +443,10 @@ def main(argv=None) -> int:
         print(f"note: no driver lock on {plan.storage}: do not run this sweep from two drivers at once",
               file=sys.stderr)
     try:
-        print_plan(plan, args)
+        print_plan(plan)
         from sweeps.sweep import run_sweep
 
-        return run_sweep(plan, args, sweep_dir, git_commit())
+        return run_sweep(plan, sweep_dir, git_commit())
     finally:
         if lock is not None:
             lock.release()

@@ -1,7 +1,10 @@
-"""Named search spaces and budgets, declared in one place and validated.
+"""From a sweep (sweeps/sweep_file.py) to its trials: budgets, the expansion of a grid into
+:class:`TrialSpec`s, a search's Tune distributions, and the one place a trial's fields are resolved
+(:func:`trial_params`).
 
-A space expands to a list of :class:`TrialSpec` (grid spaces) or, for ``search``, to a Tune
-search space that Optuna samples. Each trial is one run of one algorithm (``algo``: LAC or a
+A grid sweep expands to a list of :class:`TrialSpec` (:func:`expand`); a search to Tune
+distributions that Optuna samples (:func:`tune_search_space`). Each trial is one run of one
+algorithm (``algo``: LAC or a
 baseline, lac_rllib/algorithms/registry.py): a task, a seed and the algorithm's field overrides.
 """
 
@@ -10,36 +13,9 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-PAPER_TASKS = (
-    "SafetyPointGoal1-v0", "SafetyCarGoal1-v0", "SafetyPointButton1-v0", "SafetyCarButton1-v0",
-    "focops/AntVelocity-v0", "focops/SwimmerVelocity-v0", "focops/HumanoidVelocity-v0",
-    "focops/HumanoidCircle-v0",
-)
-SPACES = ("ablation", "search", "paper", "smoke", "compare")
 REPEAT_INDEX = "__trial_index__"  # ray.tune.search.repeater.TRIAL_INDEX (not imported: no Ray before the plan)
-DEFAULT_TASK = "lac/PointHazard-v0"  # the default ablation: a task that learns in minutes
-PAPER_ABLATION_TASK = "SafetyPointGoal1-v0"  # the paper's Table 3 (--task ... --budget paper)
+DEFAULT_TASK = "lac/PointHazard-v0"  # a sweep file that names no task: a task that learns in minutes
 QUICK_TINY_STEPS = 40_000
-SMOKE_TASK = "lac/PointHazard-v0"
-#: The compare space: every algorithm at one budget (LAC first: the others are compared with it).
-COMPARE_ALGOS = ("lac", "ppo_lag", "sac_lag")
-
-# Table 3: NI × T, VT × T, PR × β (the paper's ablations, each × seeds).
-ABLATION = {
-    "NI": ("langevin_steps", (30, 50, 100, 200, 500), {"langevin_start": "noninformative"}),
-    "VT": ("langevin_steps", (10, 20, 30, 40, 50, 100), {}),
-    "PR": ("beta", (0.0, 1.0, 5.0, 10.0, 20.0), {}),
-}
-SMOKE = {"smoke": ("langevin_steps", (5, 10), {})}
-# The default ablation's grid (the quick budget on lac/PointHazard-v0): Table 3's three groups at
-# the chain lengths the tiny task's preset (T = 10) is built around. The paper's T up to 500 would
-# cost ~50x a T = 10 trial's chain: 48 trials do not fit the 35 minutes on 2 cores that a first
-# run gets; --task SafetyPointGoal1-v0 --budget paper runs Table 3 itself.
-QUICK_ABLATION = {
-    "NI": ("langevin_steps", (20, 30), {"langevin_start": "noninformative"}),
-    "VT": ("langevin_steps", (10, 20, 30), {}),
-    "PR": ("beta", (0.5, 1.0), {}),
-}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,8 +26,6 @@ class Budget:
 
     by_preset: dict
     doc: str
-    #: The ablation's groups at this budget, per preset, where they differ from Table 3's ``ABLATION``.
-    ablation_by_preset: dict = dataclasses.field(default_factory=dict)
     #: A baseline's overrides at this budget, per preset ("*": any other); none: its preset's values.
     by_algo: dict = dataclasses.field(default_factory=dict)
 
@@ -95,7 +69,7 @@ BUDGETS: dict[str, Budget] = {
     "smoke": Budget({"*": (2_000, _SMOKE)}, "seconds per trial: proves the machinery, learns nothing",
                     by_algo=_SMOKE_BY_ALGO),
     # The default ablation (python sweeps/run.py --space ablation): on the tiny task, where
-    # QUICK_TINY_STEPS of the tiny preset learn, on a reduced Table 3 grid (QUICK_ABLATION);
+    # QUICK_TINY_STEPS of the tiny preset learn, on a reduced Table 3 grid (sweeps/builtin/ablation.yaml);
     # calibrated by running it (docs/sweeps.md). The fused chain pays here: a T = 30 trial runs
     # ~1,400 chains of 30 steps, and the compiled kernels are cached on disk across trials. Ten
     # envs per runner: RLlib's per-step machinery took 55% of a one-env trial (py-spy); ten
@@ -109,17 +83,19 @@ BUDGETS: dict[str, Budget] = {
                                     "num_envs_per_env_runner": 1, "langevin_fused": False})},
                     "the default ablation learns lac/PointHazard-v0 in ~30 min on 2 cores; on the paper's tasks "
                     "a machinery check that learns nothing",
-                    ablation_by_preset={"tiny": QUICK_ABLATION}, by_algo=_QUICK_BY_ALGO),
+                    by_algo=_QUICK_BY_ALGO),
     "paper": Budget({"*": (2_500_000, {})}, "the paper's 2.5M env steps with the docs/spec.md §5 presets"),
 }
 
-# Optuna TPE ranges for the search space (T int, η and λ log-uniform, β uniform).
-SEARCH_RANGES = {
-    "langevin_steps": ("int", 10, 100),
-    "langevin_step_size": ("log", 1e-5, 1e-3),
-    "temperature": ("log", 1e-4, 1e-2),
-    "beta": ("uniform", 0.0, 20.0),
-}
+
+
+def get_budget(budget: str | int) -> Budget:
+    """A named budget (``BUDGETS``) or a number of env steps (with the presets' own fields)."""
+    if isinstance(budget, int) and not isinstance(budget, bool):
+        return Budget({"*": (budget, {})}, "env steps with each algorithm's preset fields")
+    if budget not in BUDGETS:
+        raise ValueError(f"unknown budget {budget!r}; accepted: {' | '.join(BUDGETS)} or a number of env steps")
+    return BUDGETS[budget]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,6 +118,8 @@ class TrialSpec:
     #: them (at plan time for a grid trial, in the trial for a search sample); what the estimate,
     #: the trainable and the default flag read. None until resolved.
     params: dict | None = None
+    #: Env steps of this trial (its budget on its task, for its algorithm). None until resolved.
+    timesteps: int | None = None
 
     @property
     def algo(self) -> str:
@@ -184,16 +162,16 @@ def speed_fields(params: dict) -> frozenset:
 SEARCH_LABEL = {"langevin_steps": "T", "langevin_step_size": "eta", "temperature": "lam", "beta": "beta"}
 
 
+def _short(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.1e}" if v and abs(v) < 1e-2 else f"{v:.3g}"
+    return str(v)
+
+
 def search_label(overrides: dict, seed: int | None) -> str:
     """A search trial's label from its sampled values, e.g. ``search-T=37-eta=2.1e-04-lam=3.0e-03-beta=4.2-s0``
     (without ``-s0`` when ``seed`` is None: the configuration)."""
-    parts = []
-    for name, short in SEARCH_LABEL.items():
-        v = overrides.get(name)
-        if v is not None:
-            kind = SEARCH_RANGES[name][0]
-            fmt = {"int": "d", "log": ".1e"}.get(kind, ".1f")
-            parts.append(f"{short}={v:{fmt}}")
+    parts = [f"{SEARCH_LABEL.get(name, name)}={_short(v)}" for name, v in overrides.items() if v is not None]
     return "-".join(["search", *parts, *([] if seed is None else [f"s{seed}"])])
 
 
@@ -201,57 +179,70 @@ def trial_spec(config: dict) -> TrialSpec:
     """A Tune trial's config as the TrialSpec it runs: a grid trial carries its own, resolved at
     plan time (``trial``); a search trial is made from what Optuna sampled (``overrides``), resolved
     here through the same :func:`trial_params` (with the sweep's ``budget`` and ``sets``), its seed
-    the index among its sample's seeds (Tune's Repeater numbers the repeats of one Optuna sample 0..N-1)."""
+    the sweep's seed at its index among its sample's repeats (Tune's Repeater numbers them 0..N-1)."""
     if "trial" in config:
         return TrialSpec(**config["trial"])
     task, budget, sets = config["task"], config["budget"], config.get("sets", {})
     sampled = dict(config["overrides"])
     params = trial_params(task, budget, sets, sampled)
-    return TrialSpec("search", "", None, task, int(config.get(REPEAT_INDEX, 0)), sampled, sampled=sampled,
-                     params=params, default=params == trial_params(task, budget, sets))
+    index = int(config.get(REPEAT_INDEX, 0))
+    seed = config["seeds"][index] if "seeds" in config else index
+    return TrialSpec("search", "", None, task, seed, sampled, sampled=sampled, params=params,
+                     default=params == trial_params(task, budget, sets),
+                     timesteps=get_budget(budget).for_task(task, params["algo"])[0])
 
 
-def validate(space: str, task: str | None, budget: str, seeds: int) -> None:
-    """Raise ValueError naming the bad value and the accepted ones (no Ray needed)."""
+def groups_for(sweep, preset: str) -> dict:
+    """The sweep file's groups for a task of ``preset`` at the sweep's budget: the first matching
+    ``groups_at``, else ``groups``, else its ``grid`` as one group, else one configuration."""
+    from sweeps.sweep_file import Group
+
+    for at in sweep.groups_at:
+        if at.budget in (None, str(sweep.budget)) and at.preset in (None, preset):
+            return at.groups
+    if sweep.groups is not None:
+        return sweep.groups
+    return {sweep_group_name(sweep): Group(grid=sweep.grid or {})}
+
+
+def sweep_group_name(sweep) -> str:
+    """A file's one group is named after the sweep (the built-in ``paper`` and ``smoke``)."""
+    return sweep.name or "sweep"
+
+
+def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
+    """A grid sweep's trials, in order: task, group, configuration (grid combinations, the file's
+    order), algorithm (where ``algo`` is a list), seed. A configuration's ``overrides`` are its
+    group's ``set`` under its grid values; ``param``/``value`` name what its grid point sweeps."""
+    import itertools
+
     from lac_rllib.tasks import get_task
+    from sweeps.sweep_file import to_field_value
 
-    if space not in SPACES:
-        raise ValueError(f"unknown space {space!r}; accepted: {', '.join(SPACES)}")
-    if budget not in BUDGETS:
-        raise ValueError(f"unknown budget {budget!r}; accepted: {', '.join(BUDGETS)}")
-    if not isinstance(seeds, int) or seeds < 1:
-        raise ValueError(f"--seeds {seeds!r} is invalid; accepted: an integer >= 1")
-    if task is not None:
-        get_task(task)  # unknown id -> ValueError listing the known ones
+    algos = sweep.algo if len(sweep.algo) > 1 else (None,)
+    trials = []
+    for task in task_ids:
+        for name, group in groups_for(sweep, get_task(task).preset).items():
+            fields = list(group.grid)
+            for combo in itertools.product(*group.grid.values()):
+                point = {f: to_field_value(v) for f, v in zip(fields, combo)}
+                param = ",".join(fields)
+                value = (point[fields[0]] if len(fields) == 1 else ",".join(_short(v) for v in point.values())
+                         ) if fields else None
+                for algo in algos:
+                    overrides = {**{k: to_field_value(v) for k, v in group.set.items()}, **point,
+                                 **({"algo": algo} if algo else {})}
+                    trials += [TrialSpec(name, param, value, task, seed, overrides) for seed in sweep.seed_list()]
+    return trials
 
 
-def default_task(space: str, task: str | None) -> str | None:
-    if task is not None:
-        return task
-    return {"smoke": SMOKE_TASK, "paper": None}.get(space, DEFAULT_TASK)
+def tune_search_space(search: dict) -> dict:
+    """A search file's distributions as Tune's (OptunaSearch converts them to Optuna's)."""
+    from ray import tune
 
-
-def grid(space: str, task: str | None, seeds: int, budget: str = "paper") -> list[TrialSpec]:
-    """The trials of a grid space (``ablation``, ``paper``, ``smoke``) at ``budget``."""
-    from lac_rllib.tasks import get_task
-
-    task = default_task(space, task)
-    if space == "compare":  # algo × seeds: every algorithm at the same budget, LAC first
-        return [TrialSpec("compare", "algo", algo, task, seed, {"algo": algo})
-                for algo in COMPARE_ALGOS for seed in range(seeds)]
-    if space == "paper":
-        tasks = (task,) if task else PAPER_TASKS
-        return [TrialSpec("paper", "", None, t, s, {}) for t in tasks for s in range(seeds)]
-    ablation = BUDGETS[budget].ablation_by_preset.get(get_task(task).preset, ABLATION)
-    groups = ablation if space == "ablation" else SMOKE if space == "smoke" else None
-    if groups is None:
-        raise ValueError(f"space {space!r} is not a grid")
-    return [
-        TrialSpec(group, param, value, task, seed, {**fixed, param: value})
-        for group, (param, values, fixed) in groups.items()
-        for value in values
-        for seed in range(seeds)
-    ]
+    kinds = {"choice": lambda *c: tune.choice(list(c)), "uniform": tune.uniform, "loguniform": tune.loguniform,
+             "int": lambda lo, hi: tune.randint(lo, hi + 1), "quniform": tune.quniform}
+    return {name: kinds[d.kind](*d.args) for name, d in search.items()}
 
 
 def trial_params(task: str, budget: str, sets: dict, overrides: dict | None = None) -> dict[str, Any]:
@@ -265,7 +256,7 @@ def trial_params(task: str, budget: str, sets: dict, overrides: dict | None = No
     from lac_rllib.algorithms.registry import ALGO_FIELD, build_config, split_algo
 
     algo, fields = split_algo({**sets, **(overrides or {})})
-    steps, budget_overrides = BUDGETS[budget].for_task(task, algo)
+    steps, budget_overrides = get_budget(budget).for_task(task, algo)
     config = build_config(algo, task, 0, {**budget_overrides, **fields}, timesteps=steps)
     return {ALGO_FIELD: algo, **config.params()}
 
@@ -279,13 +270,6 @@ def resolve_trials(trials: list[TrialSpec], budget: str, sets: dict) -> list[Tri
         if t.task not in base:
             base[t.task] = trial_params(t.task, budget, sets)
         params = trial_params(t.task, budget, sets, t.overrides)
-        out.append(dataclasses.replace(t, params=params, default=params == base[t.task]))
+        steps = get_budget(budget).for_task(t.task, params["algo"])[0]
+        out.append(dataclasses.replace(t, params=params, default=params == base[t.task], timesteps=steps))
     return out
-
-
-def tune_search_space() -> dict:
-    """The ``search`` space as Tune distributions (OptunaSearch converts them)."""
-    from ray import tune
-
-    kinds = {"int": lambda lo, hi: tune.randint(lo, hi + 1), "log": tune.loguniform, "uniform": tune.uniform}
-    return {name: kinds[kind](lo, hi) for name, (kind, lo, hi) in SEARCH_RANGES.items()}

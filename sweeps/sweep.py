@@ -23,7 +23,7 @@ from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, E
 from sweeps import spaces
 from sweeps.live_table import LiveTable
 from sweeps.plan import Plan
-from sweeps.record import SWEEP_FILE, sweep_record
+from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
 from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
@@ -96,58 +96,75 @@ def versions() -> dict:
             "platform": platform.platform(), **runtime_versions()}
 
 
-def param_space(plan: Plan, args, parent_run_id: str) -> dict:
+def param_space(plan: Plan, parent_run_id: str) -> dict:
     common = {
-        "timesteps": plan.timesteps, "cpus": args.cpus_per_trial,
+        "timesteps": plan.timesteps, "cpus": plan.sweep.cpus_per_trial, "user_tasks": plan.user_tasks,
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
-    if plan.trials is None:  # search: Optuna samples the LAC fields; the trial resolves them (spaces.trial_spec)
-        return {**common, "task": plan.task, "budget": plan.budget, "sets": plan.sets,
-                "overrides": spaces.tune_search_space()}
-    # Each grid trial carries its LAC fields as the plan resolved them (spaces.resolve_trials).
+    if plan.trials is None:  # search: Optuna samples the fields; the trial resolves them (spaces.trial_spec)
+        return {**common, "task": plan.tasks[0], "budget": plan.sweep.budget, "sets": plan.sets,
+                "seeds": list(plan.seeds), "overrides": spaces.tune_search_space(plan.sweep.search)}
+    # Each grid trial carries its fields as the plan resolved them (spaces.resolve_trials).
     # Tune turns dataclasses in a config into tuples: each TrialSpec travels as its dict.
     return {**common, "trial": tune.grid_search([dataclasses.asdict(t) for t in plan.trials])}
 
 
-def run_sweep(plan: Plan, args, sweep_dir: Path, commit: str) -> int:
+def parent_params(plan: Plan, commit: str) -> dict:
+    """The parent run's params: the resolved sweep's settings (its file is ``sweep.yaml``) and where it ran."""
+    sweep, infra = plan.sweep, plan.infra
+    return {"space": plan.space, "task": plan.task or ",".join(plan.tasks), "budget": plan.budget,
+            "algo": ",".join(plan.swept_algos or sweep.algo), "seeds": ",".join(map(str, plan.seeds)),
+            "set": json.dumps(spaces_plain(plan.sets), default=str), "searcher": sweep.searcher,
+            "num_samples": sweep.num_samples, "scheduler": sweep.scheduler, "cpus_per_trial": sweep.cpus_per_trial,
+            "max_concurrent": plan.concurrency, "experiment": sweep.experiment, "name": plan.name,
+            "address": infra.address, "address_from": infra.address_from, "tracking_uri": infra.tracking_uri,
+            "storage": plan.storage, "resume": infra.resume, "max_failures": infra.max_failures,
+            "optuna_seed": infra.optuna_seed, "optuna_storage": plan.optuna_storage, "n_trials": plan.n_trials,
+            "timesteps": plan.timesteps, "git_commit": commit, **versions()}
+
+
+def spaces_plain(d: dict) -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
+    """Run the planned sweep; the plan is all it reads (sweeps/run.py made it from the file and flags)."""
+    infra, cpus_per_trial = plan.infra, plan.sweep.cpus_per_trial
     if not ray.is_initialized():  # tests drive sweeps inside their own Ray session
-        ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+        ray.init(address=infra.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     biggest = max((n["Resources"].get("CPU", 0) for n in ray.nodes() if n["Alive"]), default=0)
-    if args.cpus_per_trial > biggest:  # Tune would leave every trial PENDING, silently, forever
-        print(f"sweeps/run.py: error: --cpus-per-trial {args.cpus_per_trial} is more than the largest node of the "
+    if cpus_per_trial > biggest:  # Tune would leave every trial PENDING, silently, forever
+        print(f"sweeps/run.py: error: --cpus-per-trial {cpus_per_trial} is more than the largest node of the "
               f"Ray cluster has ({biggest:g} CPUs); accepted: 1..{biggest:g}", file=sys.stderr)
         return 2
-    if args.max_concurrent is None and args.address:  # the plan could only count this machine's CPUs
+    if plan.sweep.max_concurrent is None and infra.address:  # the plan could only count this machine's CPUs
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        plan = dataclasses.replace(plan, concurrency=min(plan.n_trials, max(1, cpus // args.cpus_per_trial)))
+        plan = dataclasses.replace(plan, concurrency=min(plan.n_trials, max(1, cpus // cpus_per_trial)))
         print(f"  cluster: {cpus} CPUs -> {plan.concurrency} trials at once", flush=True)
     tracker = SweepTracker(plan.tracking_uri, plan.experiment)
     state_file = sweep_dir / SWEEP_FILE
-    previous = json.loads(state_file.read_text()) if args.resume else {}
+    previous = json.loads(state_file.read_text()) if infra.resume else {}
     parent = tracker.start(
-        plan.name,
-        # "task" as resolved (the CLI's is None for a space's default task).
-        params={k: v for k, v in vars(args).items()} | {"task": plan.task, "n_trials": plan.n_trials,
-                                                        "timesteps": plan.timesteps, "git_commit": commit,
-                                                        **versions()},
-        tags={"lac.space": plan.space, "lac.budget": plan.budget, "lac.sweep_name": plan.name},
+        plan.name, params=parent_params(plan, commit),
+        tags={"lac.space": plan.space, "lac.budget": plan.budget, "lac.sweep_name": plan.name,
+              "lac.seeds": ",".join(map(str, plan.seeds)), "lac.tasks": ",".join(plan.tasks)},
         run_id=previous.get("parent_run_id"),
     )
     links = tracker.links(parent)
     print_links(links)
-    if not args.resume:
+    if not infra.resume:
         tracker.set_note(parent, f"**Sweep `{plan.name}` running**: {plan.n_trials} trials of "
                                  f"{plan.timesteps:,} env steps ({plan.space}, "
                                  f"task {plan.task or 'paper tasks'}). "
                                  "The summary replaces this note when the sweep ends.")
     # The record first: from here on a failure leaves a sweep that --resume can pick up (with
     # the same parent run), never a directory that is neither startable nor resumable.
-    sweep_dir.mkdir(parents=True, exist_ok=True)
-    state_file.write_text(json.dumps(sweep_record(plan, args, parent), default=str))
+    write_record(sweep_dir, plan, parent)
     try:
-        tuner = _tuner(plan, args, parent, sweep_dir)
-        if not args.resume:
+        tuner = _tuner(plan, parent, sweep_dir)
+        if not infra.resume:
             tracker.client.log_text(parent, json.dumps(plan.record(), indent=2, default=str), "plan.json")
+            tracker.client.log_text(parent, plan.sweep.dump(), SWEEP_YAML)  # the file that reruns this sweep
     except BaseException:
         tracker.client.set_tag(parent, STATUS_TAG, "failed to start")
         tracker.client.set_terminated(parent, status="FAILED")
@@ -186,14 +203,15 @@ def print_links(links: dict, uri: str | None = None) -> None:
     print(f"  MLflow parent run: {links['run']}", flush=True)
 
 
-def _tuner(plan: Plan, args, parent: str, sweep_dir: Path) -> tune.Tuner:
+def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
     """Tune's state if the sweep has one (resume), else a new Tuner (also for a sweep whose
     first start failed before Tune wrote anything)."""
     # A multi-CPU trial reserves a bundle per env runner, where RLlib places them (config.run_resources).
-    trainable = tune.with_resources(LACTrainable, run_resources(args.cpus_per_trial))
-    if args.resume and tune.Tuner.can_restore(str(sweep_dir)):
+    sweep, infra = plan.sweep, plan.infra
+    trainable = tune.with_resources(LACTrainable, run_resources(sweep.cpus_per_trial))
+    if infra.resume and tune.Tuner.can_restore(str(sweep_dir)):
         return tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True, resume_errored=False)
-    failure = tune.FailureConfig(max_failures=args.max_failures)
+    failure = tune.FailureConfig(max_failures=infra.max_failures)
     ckpt = tune.CheckpointConfig(checkpoint_frequency=1, num_to_keep=2, checkpoint_at_end=True)
     run_config = tune.RunConfig(
         name=plan.name, storage_path=plan.storage, failure_config=failure, checkpoint_config=ckpt,
@@ -204,15 +222,17 @@ def _tuner(plan: Plan, args, parent: str, sweep_dir: Path) -> tune.Tuner:
         import optuna
 
         # The study lives in its own storage (plan.optuna_storage) under the sweep's name:
-        # optuna-dashboard opens it, and a resumed sweep goes on with the same study.
-        optuna_search = ConstrainedOptunaSearch(sampler=optuna.samplers.TPESampler(seed=args.optuna_seed),
+        # optuna-dashboard opens it, and a resumed sweep goes on with the same study. TPE reads
+        # the constraint each configuration is told (ConstrainedOptunaSearch); random ignores it.
+        sampler = {"tpe": optuna.samplers.TPESampler, "random": optuna.samplers.RandomSampler}[sweep.searcher]
+        optuna_search = ConstrainedOptunaSearch(sampler=sampler(seed=infra.optuna_seed),
                                                 metric=METRIC, mode=MODE, study_name=plan.name,
                                                 storage=optuna.storages.RDBStorage(plan.optuna_storage))
-        search = SeedRepeater(optuna_search, repeat=args.seeds)
+        search = SeedRepeater(optuna_search, repeat=len(plan.seeds))
     scheduler = (ASHAScheduler(time_attr=ENV_STEPS, metric=METRIC, mode=MODE, max_t=plan.timesteps,
-                               grace_period=max(1, plan.timesteps // 4)) if args.scheduler == "asha" else None)
+                               grace_period=max(1, plan.timesteps // 4)) if sweep.scheduler == "asha" else None)
     return tune.Tuner(
-        trainable, param_space=param_space(plan, args, parent),
+        trainable, param_space=param_space(plan, parent),
         tune_config=tune.TuneConfig(num_samples=plan.n_trials if search else 1, search_alg=search,
                                     scheduler=scheduler, max_concurrent_trials=plan.concurrency,
                                     trial_name_creator=_trial_name),

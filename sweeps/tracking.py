@@ -32,6 +32,7 @@ STATUS_TAG = "lac.sweep_status"  # on the parent run: finished | interrupted
 STOPPED_TAG = "lac.stopped_early"  # on a child run the scheduler (ASHA) stopped before its budget
 # A child run's params besides every LAC field (written by sweeps/trainable.py, read by the report).
 P_TASK, P_SEED, P_GROUP, P_TIMESTEPS = "task", "seed", "group", "timesteps"
+P_TASK_SOURCE = "task_source"  # what builds the task's env: a factory ("module:function") or a gymnasium id
 P_ALGO, ALGO_TAG = "algo", "lac.algo"  # which algorithm the run trained: lac | ppo_lag | sac_lag
 P_SWEPT_PARAM, P_SWEPT_VALUE = "swept_param", "swept_value"  # the grid point: which field, which value
 CONFIG_ID_TAG = "lac.config_id"  # a child run's configuration without its seed (spaces.config_id)

@@ -29,6 +29,8 @@ from lac_rllib.constrained.metrics import (
     iteration_row,
     non_finite,
 )
+from lac_rllib.tasks.user import FACTORY as USER_FACTORY
+from lac_rllib.tasks.user import register_definition
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.tracking import (
@@ -45,6 +47,7 @@ from sweeps.tracking import (
     P_SWEPT_PARAM,
     P_SWEPT_VALUE,
     P_TASK,
+    P_TASK_SOURCE,
     P_TIMESTEPS,
     TrialTracker,
     learning_curve,
@@ -65,13 +68,16 @@ def objective(ret: float, cost: float, limit: float) -> float:
 
 
 class LACTrainable(tune.Trainable):
-    """One trial. config: ``trial`` (a grid trial's TrialSpec, its LAC fields resolved at plan time)
-    or, for a search, ``task``, ``budget``, ``sets`` and the sampled ``overrides`` (spaces.trial_spec
-    makes both a TrialSpec); ``timesteps``, ``cpus``, ``tracking`` {uri, experiment, parent_run_id}."""
+    """One trial. config: ``trial`` (a grid trial's TrialSpec, its fields resolved at plan time)
+    or, for a search, ``task``, ``budget``, ``sets``, ``seeds`` and the sampled ``overrides``
+    (spaces.trial_spec makes both a TrialSpec); ``timesteps``, ``cpus``, ``user_tasks`` (a user env's
+    TaskSpec as data, registered here), ``tracking`` {uri, experiment, parent_run_id}."""
 
     def setup(self, config: dict) -> None:
+        for definition in config.get("user_tasks", {}).values():  # a user's env, registered in this process
+            register_definition(definition)
         self.spec = spec = spaces.trial_spec(config)
-        self.timesteps = int(config["timesteps"])
+        self.timesteps = int(spec.timesteps or config["timesteps"])
         # The trial's algorithm and fields as resolved (spaces.trial_params), run on its CPUs (env
         # runners and torch threads: lac_rllib.algorithms.lac.config.use_cpus).
         cpus = int(config.get("cpus", 1))  # a trial's torch threads are its CPUs, whatever --set says
@@ -82,8 +88,12 @@ class LACTrainable(tune.Trainable):
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
                                     spec.label())
-        params = {P_TASK: spec.task, P_SEED: spec.seed, P_GROUP: spec.group, P_SWEPT_PARAM: spec.param,
-                  P_SWEPT_VALUE: spec.value, P_TIMESTEPS: self.timesteps, P_ALGO: algo, **self.lac_config.params()}
+        task = self.lac_config.task_spec
+        user = task.factory == USER_FACTORY
+        source = task.kwargs.get("factory") or task.kwargs.get("gym_id") if user else task.factory
+        params = {P_TASK: spec.task, P_TASK_SOURCE: source, P_SEED: spec.seed, P_GROUP: spec.group,
+                  P_SWEPT_PARAM: spec.param, P_SWEPT_VALUE: spec.value, P_TIMESTEPS: self.timesteps, P_ALGO: algo,
+                  **self.lac_config.params()}
         tags = {NODE_TAG: ray.get_runtime_context().get_node_id(), "lac.host": socket.gethostname(),
                 "lac.tune_trial_name": self.trial_name, "lac.group": spec.group,
                 # MLflow's UI groups runs by a tag and averages their curves: one group per configuration.

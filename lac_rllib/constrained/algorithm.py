@@ -29,6 +29,7 @@ from lac_rllib.constrained.metrics import (
     NU,
 )
 from lac_rllib.constrained.task_config import register_task_env
+from lac_rllib.tasks import user as user_tasks
 
 #: Version of the lac-rllib keys in a checkpoint's rllib_checkpoint.json (lac_rllib.evaluation reads
 #: this one only). 2: the classes moved to lac_rllib.algorithms / lac_rllib.constrained (0.2.0).
@@ -51,7 +52,7 @@ class SafeAlgorithm(Algorithm):
     @override(Algorithm)
     def setup(self, config) -> None:
         if config.task_id:
-            register_task_env(config.task_id)
+            register_task_env(config.task_spec)
         super().setup(config)
         self._last_episode_stats = (float("nan"), float("nan"))
 
@@ -70,6 +71,8 @@ class SafeAlgorithm(Algorithm):
             "episode_cost_discount": cfg.effective_episode_cost_discount,
             "lac_config": cfg.params(),  # the algorithm's fields (the key name predates the baselines)
         }
+        if cfg.task_spec is not None and cfg.task_spec.factory == user_tasks.FACTORY:
+            ours["task_definition"] = user_tasks.definition(cfg.task_spec)  # restorable where it is not registered
         # JSON-safe (tuples -> lists, anything exotic -> str).
         return {**super().get_metadata(), **json.loads(json.dumps(ours, default=str))}
 

@@ -39,13 +39,14 @@ class SafeTaskParams:
     dimension is not blown up to ±obs_clip; 0 = RLlib's std + 1e-8."""
 
 
-def make_task_env(env_config, task_id: str):
-    return get_task(task_id).make(env_config)
+def make_task_env(env_config, spec):
+    return spec.make(env_config)
 
 
-def register_task_env(task_id: str) -> None:
-    """Make ``task_id`` resolvable by RLlib env runners in every Ray process."""
-    register_env(task_id, functools.partial(make_task_env, task_id=task_id))
+def register_task_env(spec) -> None:
+    """Make the task resolvable by RLlib env runners in every Ray process: its spec travels with
+    the env creator, so a user's env (lac_rllib/tasks/user.py) needs no registry there."""
+    register_env(spec.id, functools.partial(make_task_env, spec=spec))
 
 
 class SafeTaskConfig:
@@ -66,6 +67,7 @@ class SafeTaskConfig:
     def __init__(self, algo_class=None):
         super().__init__(algo_class=algo_class)
         self.task_id: str | None = None
+        self._task_spec = None  # the TaskSpec itself: copies of the config (env runners) carry it
         self.num_env_runners = 0  # sample in the driver unless asked
         # Wait for the runners: an iteration needs all its env steps, and RLlib's 60 s default
         # silently drops a runner that needs longer (20k/K navigation steps at ~700 steps/s
@@ -81,9 +83,9 @@ class SafeTaskConfig:
         name = preset or spec.preset
         if name not in self.PRESETS:
             raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(self.PRESETS)}")
-        self.task_id = task_id
+        self.task_id, self._task_spec = task_id, spec
         self.training(**{**self.PRESETS[name], **(spec.overrides if self.APPLY_TASK_OVERRIDES else {})})
-        register_task_env(task_id)
+        register_task_env(spec)
         self.environment(env=task_id)
         return self
 
@@ -93,7 +95,9 @@ class SafeTaskConfig:
 
     @property
     def task_spec(self):
-        return get_task(self.task_id) if self.task_id else None
+        if self.task_id and getattr(self, "_task_spec", None) is None:
+            self._task_spec = get_task(self.task_id)
+        return self._task_spec if self.task_id else None
 
     @property
     def effective_cost_limit(self) -> float:

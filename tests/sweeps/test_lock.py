@@ -12,7 +12,7 @@ import pytest
 
 from sweeps import run as cli
 from sweeps.lock import LOCK_FILE, STALE_S, DriverLock, SweepLocked
-from sweeps.record import SWEEP_FILE, sweep_record
+from sweeps.record import write_record
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -46,11 +46,9 @@ def test_second_driver_is_refused_and_a_dead_ones_lock_is_taken_over(tmp_path):
 def test_two_resume_drivers_at_once(tmp_path):
     base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
-    args = cli.parse_args(base)
-    plan = cli.make_plan(args)
+    plan = cli.make_plan(cli.parse_args(base))
     sweep_dir = Path(plan.storage) / plan.name
-    sweep_dir.mkdir(parents=True)
-    (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
+    write_record(sweep_dir, plan, "parent-run")
     with DriverLock(sweep_dir):  # the first driver, alive
         proc = subprocess.run([sys.executable, str(REPO / "sweeps" / "run.py"), *base, "--resume"], cwd=tmp_path,
                               capture_output=True, text=True, timeout=120)

@@ -39,7 +39,7 @@ def test_table_3_itself_is_the_paper_budget_and_says_what_it_costs(tmp_path, mon
     assert (plan.n_trials, plan.timesteps) == (48, 2_500_000)
     readme_cpu_h = float(re.search(r"~(\d+)\s+CPU-hours by the plan's estimate", README).group(1))
     assert readme_cpu_h == pytest.approx(plan.estimated_cpu_h, rel=0.15)
-    cli.print_plan(plan, args)
+    cli.print_plan(plan)
     out = capsys.readouterr().out
     assert f"{plan.estimated_cpu_h:.1f} CPU-hours" in out and "docker/README.md" in out  # points to a cluster
 
@@ -111,8 +111,8 @@ def test_the_compare_space_runs_every_algorithm_at_one_budget(tmp_path, monkeypa
 
 
 @pytest.mark.parametrize("argv, needle", [
-    (("--space", "compare", "--set", "algo=sac_lag"), "the space runs every algorithm"),
-    (("--space", "ablation", "--set", "algo=ppo_lag"), "--space ablation sweeps LAC's own fields"),
+    (("--space", "compare", "--set", "algo=sac_lag"), "compare.yaml sweeps algo itself"),
+    (("--space", "ablation", "--set", "algo=ppo_lag"), "groups.NI.set.langevin_start: a field of lac, not of ppo_lag"),
     (("--space", "paper", "--set", "algo=dqn"), "unknown algo 'dqn'; accepted: lac | ppo_lag | sac_lag"),
     (("--space", "compare", "--set", "langevin_steps=5"), "a field of lac, not of ppo_lag"),
 ])
@@ -129,3 +129,27 @@ def test_a_baseline_runs_in_the_paper_space_with_its_own_preset(tmp_path, monkey
     from lac_rllib.algorithms.sac_lag.config import PRESETS
 
     assert all(trial.params[k] == v for k, v in PRESETS["tiny"].items() if k != "total_env_steps")
+
+
+def test_ray_address_is_honoured_like_address_with_the_same_cluster_checks(tmp_path, monkeypatch, capsys):
+    """``ray job submit`` starts the driver with RAY_ADDRESS set and no --address."""
+    import socket
+
+    with socket.socket() as head:
+        head.bind(("127.0.0.1", 0))
+        head.listen()
+        address = f"127.0.0.1:{head.getsockname()[1]}"
+        monkeypatch.setenv("RAY_ADDRESS", address)
+        with pytest.raises(ValueError, match=r"--tracking-uri sqlite:\S+ with RAY_ADDRESS: each node would write"):
+            _plan(tmp_path, monkeypatch, "--space", "smoke")
+        monkeypatch.setattr(cli, "check_reachable", lambda uri: None)
+        plan = _plan(tmp_path, monkeypatch, "--space", "smoke", "--tracking-uri", "http://mlflow:5000")
+        assert (plan.infra.address, plan.infra.address_from) == (address, "RAY_ADDRESS")
+        cli.print_plan(plan)
+        assert f"cluster {address} from RAY_ADDRESS" in capsys.readouterr().out
+        plan = _plan(tmp_path, monkeypatch, "--space", "smoke", "--tracking-uri", "http://mlflow:5000",
+                     "--address", address)
+        assert plan.infra.address_from == "--address"
+    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:9")
+    with pytest.raises(ValueError, match="RAY_ADDRESS 127.0.0.1:9: cannot connect"):
+        _plan(tmp_path, monkeypatch, "--space", "smoke")

@@ -40,7 +40,7 @@ def _sweep(tmp_path, args, mutate=None):
     plan = cli.make_plan(args)
     if mutate:
         plan = dataclasses.replace(plan, trials=mutate(plan.trials))
-    return run_sweep(plan, args, Path(plan.storage) / plan.name, "test-commit")
+    return run_sweep(plan, Path(plan.storage) / plan.name, "test-commit")
 
 
 @pytest.mark.slow
@@ -278,8 +278,8 @@ def test_a_fresh_search_does_not_adopt_an_existing_study(tmp_path):
 @pytest.mark.parametrize("extra,needle", [
     (["--space", "nope"], "invalid choice: 'nope'"),
     (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
-    (["--budget", "huge"], "invalid choice: 'huge'"),
-    (["--seeds", "0"], "--seeds 0 is invalid; accepted: an integer >= 1"),
+    (["--budget", "huge"], "argument --budget: 'huge' is invalid; accepted: smoke | quick | paper or env steps"),
+    (["--seeds", "0"], "argument --seeds: 0 is invalid; accepted: an integer >= 1"),
     (["--tracking-uri", "http://127.0.0.1:9"], "--tracking-uri http://127.0.0.1:9 is unreachable"),
     (["--address", "127.0.0.1:9"], "--address 127.0.0.1:9: cannot connect"),
     (["--address", "not an address"], "accepted: auto, HOST:PORT"),
@@ -287,7 +287,7 @@ def test_a_fresh_search_does_not_adopt_an_existing_study(tmp_path):
     (["--cpus-per-trial", "4096"], "--cpus-per-trial 4096 is more than this machine's"),
     (["--storage", "s3://bucket/sweeps"], "--storage s3://bucket/sweeps: object stores are not supported"),
     (["--storage", "/proc/x/tune"], "--storage /proc/x/tune is not a writable directory"),
-    (["--set", "no_such_field=1"], "unknown LAC config field 'no_such_field'"),
+    (["--set", "no_such_field=1"], "--set no_such_field: unknown lac field 'no_such_field'"),
 ])
 def test_bad_inputs_fail_before_ray(tmp_path, extra, needle, monkeypatch, capsys):
     _check_bad_input(tmp_path, extra, needle, monkeypatch, capsys)
@@ -312,7 +312,7 @@ def _check_bad_input(tmp_path, extra, needle, monkeypatch, capsys):
 def test_a_bad_input_fails_before_ray_as_a_command(tmp_path):
     cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--space", "smoke", "--set", "no_such_field=1"]
     proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2 and "unknown LAC config field 'no_such_field'" in proc.stderr
+    assert proc.returncode == 2 and "--set no_such_field: unknown lac field 'no_such_field'" in proc.stderr
     assert "Started a local Ray instance" not in proc.stdout + proc.stderr
     assert not (tmp_path / "ray_results").exists()
 
@@ -341,27 +341,25 @@ def test_a_nan_constraint_does_not_kill_the_searcher():
 def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, capsys):
     # The session's Ray has 2 CPUs (as a cluster reached with --address could have): a 3-CPU trial
     # would wait in PENDING forever.
-    args = _args(tmp_path)
-    plan = cli.make_plan(args)
-    args.cpus_per_trial = 3
-    assert run_sweep(plan, args, Path(plan.storage) / plan.name, "test-commit") == 2
+    plan = cli.make_plan(_args(tmp_path))
+    plan = dataclasses.replace(plan, sweep=plan.sweep.model_copy(update={"cpus_per_trial": 3}))
+    assert run_sweep(plan, Path(plan.storage) / plan.name, "test-commit") == 2
     assert "--cpus-per-trial 3 is more than the largest node of the Ray cluster has (2 CPUs)" in capsys.readouterr().err
     assert not (tmp_path / "mlflow.db").exists() or not _runs(tmp_path)[1], "no parent run for a sweep that never ran"
 
 
 @pytest.mark.parametrize("changed,needle", [
-    (["--experiment", "other"], "--experiment='test' (now 'other')"),
-    (["--seeds", "3"], "--seeds=2 (now 3)"),
+    (["--experiment", "other"], "experiment='test' (now 'other')"),
+    (["--seeds", "3"], "seeds={'count': 2, 'start': 0} (now {'count': 3, 'start': 0})"),
+    (["--set", "obs_clip=4.0"], "set={} (now {'obs_clip': 4.0})"),
+    (["--optuna-seed", "3"], "--optuna-seed=0 (now 3)"),
     (["--tracking-uri", "sqlite:///elsewhere.db"], "tracking_uri="),
 ])
 def test_resume_with_other_settings_is_refused(tmp_path, changed, needle, monkeypatch, capsys):
-    from sweeps.record import SWEEP_FILE, sweep_record
+    from sweeps.record import write_record
 
-    args = _args(tmp_path)
-    plan = cli.make_plan(args)
-    sweep_dir = Path(plan.storage) / plan.name
-    sweep_dir.mkdir(parents=True)
-    (sweep_dir / SWEEP_FILE).write_text(json.dumps(sweep_record(plan, args, "parent-run")))
+    plan = cli.make_plan(_args(tmp_path))
+    write_record(Path(plan.storage) / plan.name, plan, "parent-run")
     base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
     _check_bad_input(tmp_path, [*base, *changed, "--resume"], ("was started with other settings", needle),
@@ -382,12 +380,12 @@ def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monk
     with monkeypatch.context() as m:
         m.setattr(sweep_mod, "_tuner", broken)
         with pytest.raises(RuntimeError, match="could not be built"):
-            run_sweep(plan, args, sweep_dir, "test-commit")
+            run_sweep(plan, sweep_dir, "test-commit")
     _, parents, _ = _runs(tmp_path)
     assert parents[0].info.status == "FAILED" and parents[0].data.tags["lac.sweep_status"] == "failed to start"
     assert (sweep_dir / "sweep.json").exists()  # resumable: not "exists" and "no sweep" at once
     args.resume = True
-    assert run_sweep(cli.make_plan(args), args, sweep_dir, "test-commit") == 0
+    assert run_sweep(cli.make_plan(args), sweep_dir, "test-commit") == 0
     _, parents, children = _runs(tmp_path)
     assert len(parents) == 1 and parents[0].info.status == "FINISHED"  # the same parent run, completed
     assert len(children) == 4 and all(c.info.status == "FINISHED" for c in children)
@@ -479,3 +477,34 @@ def test_a_smoke_compare_sweep_runs_every_algorithm_and_evaluate_restores_each(r
     err = capsys.readouterr().err
     assert e.value.code == 2 and "--actions langevin is LAC's" in err and "accepted: --actions generator" in err
     assert len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.slow
+def test_a_sweep_on_a_users_own_env_lands_in_mlflow_and_restores(ray_session, tmp_path, capsys):
+    """A factory in tests/ (not importable by Ray's workers from their own path): 2 trials train on
+    it, their runs name the factory, and lac-eval rebuilds the env from the checkpoint's definition."""
+    from lac_rllib.tasks import registry
+    from sweeps import evaluate
+
+    path = tmp_path / "mine.yaml"
+    path.write_text("task: {factory: 'user_envs:make_safe', cost_limit: 5, cost_key: violation, preset: tiny,"
+                    " name: mine/Line-v0}\nbudget: smoke\nseeds: {count: 2, start: 40}\n")
+    args = cli.parse_args(["--config", str(path), "--max-concurrent", "2", "--experiment", "test",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")])
+    assert _sweep(tmp_path, args) == 0
+    client, parents, children = _runs(tmp_path)
+    assert parents[0].data.tags["lac.seeds"] == "40,41" and parents[0].data.tags["lac.tasks"] == "mine/Line-v0"
+    assert sorted(int(c.data.params["seed"]) for c in children) == [40, 41]
+    for c in children:
+        assert c.info.status == "FINISHED" and c.data.params["task"] == "mine/Line-v0"
+        assert c.data.params["task_source"] == "user_envs:make_safe"
+        assert c.data.metrics["cost_limit"] == 5.0 and "episode_cost" in c.data.metrics
+    yaml_text = client.download_artifacts(parents[0].info.run_id, "sweep.yaml", str(tmp_path))
+    assert "user_envs:make_safe" in Path(yaml_text).read_text()
+    registry._TASKS.pop("mine/Line-v0")  # as in a fresh process: only the checkpoint knows the env
+    capsys.readouterr()
+    code = evaluate.main(["--run-id", children[0].info.run_id, "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                          "--episodes", "2", "--json", "--no-progress"])
+    out = capsys.readouterr().out
+    result = json.loads(out.strip().splitlines()[-1])
+    assert code == 0 and result["task"] == "mine/Line-v0" and result["episodes"] == 2, out

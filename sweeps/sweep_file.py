@@ -1,0 +1,593 @@
+"""Sweep files: what a sweep runs, declared in YAML (``sweeps/run.py --config FILE.yaml``).
+
+The schema is a pydantic model (:class:`SweepFile`), each key declared once with a docstring
+below it: docs/sweeps.md's reference is generated from it (``python -m sweeps.sweep_file``). A
+file is checked in two passes before Ray starts, and every error is one line naming the file,
+the line, the key path and what is accepted:
+
+1. the structure (:meth:`SweepFile.model_validate`): unknown keys (with the closest name), types,
+   ranges, one distribution per searched field, an empty grid;
+2. the fields (:func:`check_fields`): every field in ``set``, ``grid``, ``groups`` and ``search``
+   against the declaration of each algorithm the trial runs (lac_rllib/algorithms/registry.py):
+   an unknown field (with the closest name), a value or distribution outside what the field
+   accepts, a field that belongs to another algorithm.
+
+The built-in spaces are files in ``sweeps/builtin/`` (``--space NAME`` reads ``NAME.yaml``).
+A resolved sweep (defaults and flags applied) is again a :class:`SweepFile`: ``sweep.yaml`` in the
+parent run and beside Tune's state is a file that reruns the same sweep.
+"""
+
+from __future__ import annotations
+
+import builtins
+import difflib
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    NonNegativeInt,
+    PositiveInt,
+    Tag,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+BUILTIN_DIR = Path(__file__).with_name("builtin")
+BUDGET_NAMES = ("smoke", "quick", "paper")
+SEARCHERS = ("grid", "random", "tpe")
+Scalar = bool | int | float | str | None
+
+
+class SweepFileError(ValueError):
+    """A bad sweep file: ``FILE:LINE: key.path: what is wrong; accepted: ...`` (one line)."""
+
+
+def _schema_config(**extra) -> ConfigDict:
+    return ConfigDict(extra="forbid", use_attribute_docstrings=True, frozen=True, **extra)
+
+
+class Seeds(BaseModel):
+    """``count`` seeds from ``start``: start, start + 1, ...; or an explicit ``list``."""
+
+    model_config = _schema_config()
+    count: PositiveInt | None = None
+    """How many seeds per configuration (a search: per sampled configuration)."""
+    start: NonNegativeInt = 0
+    """The first seed: confirmation runs start past the seeds a search saw (e.g. 100)."""
+    list: tuple[NonNegativeInt, ...] | None = None
+    """The seeds themselves (instead of count and start); distinct."""
+
+    @model_validator(mode="after")
+    def _one_form(self):
+        if (self.count is None) == (self.list is None):
+            raise ValueError("give count (and start) or list")
+        if self.list is not None and (not self.list or len(set(self.list)) != len(self.list)):
+            raise ValueError(f"list {list(self.list)} must hold distinct seeds, at least one")
+        return self
+
+    def values(self) -> tuple[int, ...]:
+        return tuple(self.list) if self.list is not None else tuple(range(self.start, self.start + self.count))
+
+
+def _seeds_form(v: Any) -> Any:
+    """``3`` → {count: 3}; ``[100, 101]`` → {list: [...]}: the short forms a file may use."""
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, int):
+        return {"count": v}
+    if isinstance(v, (list, tuple)):
+        return {"list": v}
+    return v
+
+
+class UserEnv(BaseModel):
+    """An env lac-rllib does not ship: built by ``factory`` (``"module:function"``, called with the
+    env config dict) or made from a registered gymnasium ``id`` (``"module:Env-v0"`` imports the
+    module first), whose per-step cost is ``info[cost_key]``. Before Ray starts the service builds
+    it once and steps it, and refuses one whose spaces are not flat Boxes or whose info has no cost."""
+
+    model_config = _schema_config()
+    factory: str | None = Field(None, pattern=r"^[\w.]+:\w+$")
+    """``"package.module:function"``: called as ``function(env_config)``, returns a gymnasium env."""
+    id: str | None = None
+    """A registered gymnasium id (``gym.make(id)``), instead of ``factory``."""
+    cost_limit: float = Field(ge=0)
+    """b, the limit on the episode cost (required: there is no sensible default)."""
+    episode_cost_discount: float = Field(1.0, gt=0, le=1)
+    """γ_C of the episode cost the multiplier reads: 1 sums the per-step costs (Safety-Gym's convention)."""
+    cost_key: str = "cost"
+    """The key of ``info`` that holds the step's cost."""
+    preset: Literal["mujoco", "safety_gym", "tiny"] = "mujoco"
+    """Which family's preset the algorithms start from (docs/config.md): ``mujoco`` is the paper's
+    Table 4 for continuous control, the general case."""
+    kwargs: dict[str, Any] = {}
+    """Passed to the factory (merged into its env config) or to ``gym.make``."""
+    name: str | None = Field(None, pattern=r"^[\w./-]+$")
+    """The task's name in the sweep, its runs and labels (default: ``user/<function or id>``)."""
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        if (self.factory is None) == (self.id is None):
+            raise ValueError("give factory or id (one of them)")
+        return self
+
+    def task_id(self) -> str:
+        return self.name or "user/" + (self.factory or self.id).replace(":", ".")
+
+
+TaskRef = Annotated[
+    Annotated[str, Tag("<task id>")] | Annotated[UserEnv, Tag("<user env>")],
+    Discriminator(lambda v: "<user env>" if isinstance(v, (dict, UserEnv)) else "<task id>"),
+]
+
+
+class Distribution(BaseModel):
+    """One searched field's distribution: exactly one key."""
+
+    model_config = _schema_config()
+    choice: tuple[Scalar, ...] | None = Field(None, min_length=1)
+    """One of these values (numbers, strings, booleans, null: Optuna's categorical)."""
+    uniform: tuple[float, float] | None = None
+    """[low, high]."""
+    loguniform: tuple[float, float] | None = None
+    """[low, high], low > 0: uniform in log space."""
+    int: tuple[builtins.int, builtins.int] | None = None
+    """[low, high]: an integer, both ends included."""
+    quniform: tuple[float, float, float] | None = None
+    """[low, high, q]: uniform, rounded to a multiple of q (quantised)."""
+
+    @model_validator(mode="after")
+    def _exactly_one(self):
+        given = [k for k in type(self).model_fields if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"give exactly one of {', '.join(type(self).model_fields)} "
+                             f"(got {', '.join(given) or 'none'})")
+        kind, args = self.kind, self.args
+        if kind != "choice" and not args[0] < args[1]:
+            raise ValueError(f"{kind}: low {args[0]} must be below high {args[1]}")
+        if kind == "loguniform" and args[0] <= 0:
+            raise ValueError(f"loguniform: low {args[0]} must be > 0")
+        if kind == "quniform" and args[2] <= 0:
+            raise ValueError(f"quniform: q {args[2]} must be > 0")
+        return self
+
+    @property
+    def kind(self) -> str:
+        return next(k for k in type(self).model_fields if getattr(self, k) is not None)
+
+    @property
+    def args(self) -> tuple:
+        return getattr(self, self.kind)
+
+    def values_to_check(self) -> list:
+        """The values a field must accept for this distribution to be valid: its choices or its ends."""
+        return list(self.args) if self.kind == "choice" else list(self.args[:2])
+
+
+def _grid_lists(grid: dict) -> dict:
+    for name, values in grid.items():
+        if not values:
+            raise ValueError(f"{name}: an empty list of values; accepted: a non-empty list")
+    return grid
+
+
+class Group(BaseModel):
+    """Named configurations: every combination of ``grid``'s values, each with ``set`` on top."""
+
+    model_config = _schema_config()
+    grid: dict[str, tuple[Any, ...]] = {}
+    """field → values: one configuration per combination (none: one configuration, ``set`` alone)."""
+    set: dict[str, Any] = {}
+    """Fields this group's configurations set (the sweep's ``set`` below them, ``grid`` above)."""
+
+    _lists = field_validator("grid")(classmethod(lambda cls, v: _grid_lists(v)))
+
+
+class GroupsAt(BaseModel):
+    """Groups that replace ``groups`` where a trial's budget and task preset match: the default
+    ablation runs a reduced Table 3 at the quick budget on the tiny task."""
+
+    model_config = _schema_config()
+    budget: str | None = None
+    """The budget name this applies at (none: any)."""
+    preset: Literal["mujoco", "safety_gym", "tiny"] | None = None
+    """The task preset this applies to (none: any)."""
+    groups: dict[str, Group] = Field(min_length=1)
+    """The groups there."""
+
+
+class SweepFile(BaseModel):
+    """A sweep: task(s) × algorithm(s) × configurations × seeds at one budget, searched or gridded.
+
+    Every key is optional; what a file leaves out comes from the command line's flags, then from
+    the defaults shown here. Flags given on the command line win over the file."""
+
+    model_config = _schema_config()
+    description: str | None = None
+    """What the sweep is for (shown in the plan and the parent run's note)."""
+    name: str | None = Field(None, pattern=r"^[\w.-]+$")
+    """The sweep's name: its Tune directory and MLflow parent run; ``--resume`` finds it by name
+    (default: FILE-TASK-BUDGET)."""
+    task: tuple[TaskRef, ...] | None = Field(None, min_length=1)
+    """A task id (docs/tasks.md), a user env (``{factory: "pkg.mod:make", cost_limit: 10}``) or a
+    list of them; default ``lac/PointHazard-v0``."""
+    algo: tuple[str, ...] = ("lac",)
+    """The algorithm (``lac | ppo_lag | sac_lag``) or a list (every configuration runs with each)."""
+    budget: str | PositiveInt | None = None
+    """Env steps per trial: a named budget (``smoke | quick | paper``, with the overrides that make
+    it meaningful: docs/sweeps.md) or a number of env steps (the presets' fields); default quick."""
+    seeds: Seeds | None = None
+    """A count (``3``), ``{count: 3, start: 100}``, or a list (``[100, 101, 102]``); default 3 from 0."""
+    set: dict[str, Any] = {}
+    """Fields every trial sets (as ``--set``; docs/config.md lists each algorithm's)."""
+    grid: dict[str, tuple[Any, ...]] | None = None
+    """field → values: one configuration per combination (the file's one group)."""
+    groups: dict[str, Group] | None = None
+    """Named groups of configurations, the sweep runs all of them (e.g. Table 3's NI, VT, PR)."""
+    groups_at: tuple[GroupsAt, ...] = ()
+    """Groups used instead of ``groups`` at a budget and task preset (the first match wins)."""
+    search: dict[str, Distribution] | None = Field(None, min_length=1)
+    """field → distribution, sampled ``num_samples`` times by ``searcher``."""
+    searcher: Literal["grid", "random", "tpe"] | None = None
+    """``grid`` (``grid``/``groups``; the default without ``search``), ``random`` (Optuna's random
+    sampler) or ``tpe`` (Optuna's TPE with the feasibility constraint; the default with ``search``)."""
+    num_samples: PositiveInt | None = None
+    """Configurations a search samples (each trained with every seed); default 20."""
+    scheduler: Literal["none", "asha"] | None = None
+    """``asha`` stops poor trials early (Tune's ASHA on the objective); default none."""
+    max_concurrent: PositiveInt | None = None
+    """Trials at once (default: CPUs / cpus_per_trial)."""
+    cpus_per_trial: PositiveInt | None = None
+    """CPUs per trial: as many env runners sample and as many torch threads update; default 1."""
+    experiment: str | None = None
+    """The MLflow experiment (default ``lac-sweeps``)."""
+
+    @field_validator("task", "algo", mode="before")
+    @classmethod
+    def _one_or_list(cls, v):
+        return v if isinstance(v, (list, tuple)) or v is None else [v]
+
+    @field_validator("seeds", mode="before")
+    @classmethod
+    def _seeds(cls, v):
+        return _seeds_form(v)
+
+    @field_validator("algo")
+    @classmethod
+    def _algos(cls, v):
+        from lac_rllib.algorithms.registry import ALGOS
+
+        bad = [a for a in v if a not in ALGOS]
+        if bad or not v or len(set(v)) != len(v):
+            raise ValueError(f"{bad[0] if bad else list(v)!r}: accepted: {' | '.join(ALGOS)} "
+                             "(or a list of distinct ones)")
+        return v
+
+    @field_validator("budget")
+    @classmethod
+    def _budget(cls, v):
+        if isinstance(v, str) and v not in BUDGET_NAMES:
+            raise ValueError(f"unknown budget {v!r}; accepted: {' | '.join(BUDGET_NAMES)} or env steps (an integer)")
+        return v
+
+    _lists = field_validator("grid")(classmethod(lambda cls, v: v if v is None else _grid_lists(v)))
+
+    @model_validator(mode="after")
+    def _shape(self):
+        if self.grid is not None and self.groups is not None:
+            raise ValueError("give grid or groups, not both (a grid is one group)")
+        if self.grid == {} or self.groups == {}:
+            raise ValueError("an empty grid; accepted: field → a non-empty list of values")
+        if self.search is not None:
+            if self.grid is not None or self.groups is not None or self.groups_at:
+                raise ValueError("give search or grid/groups, not both")
+            if self.searcher == "grid":
+                raise ValueError("searcher grid samples nothing: it runs grid/groups; "
+                                 "accepted with search: random | tpe")
+            if self.task is not None and len(self.task) > 1:
+                raise ValueError("a search optimises one task; run one sweep per task")
+            if len(self.algo) > 1:
+                raise ValueError("a search runs one algorithm; search over it instead: search: {algo: {choice: [...]}}")
+        elif self.searcher in ("random", "tpe"):
+            raise ValueError(f"searcher {self.searcher} needs a search section (field → distribution)")
+        return self
+
+    @property
+    def is_search(self) -> bool:
+        return self.search is not None
+
+    def seed_list(self) -> tuple[int, ...]:
+        return (self.seeds or Seeds(count=3)).values()
+
+    def dump(self) -> str:
+        """The sweep as YAML, every key this sweep sets (``sweep.yaml``)."""
+        return yaml.safe_dump(to_plain(self.model_dump(exclude_none=True, exclude_defaults=False)),
+                              sort_keys=False, width=110)
+
+
+# ----------------------------------------------------------------------------- loading
+
+
+class _Loader(yaml.SafeLoader):
+    """YAML 1.1 reads ``1e-4`` as a string (it wants ``1.0e-4``): numbers as people write them."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*\.?[0-9_]*|\.[0-9_]+)[eE][-+]?[0-9]+$|^[-+]?[0-9][0-9_]*\.[0-9_]*$"
+               r"|^[-+]?\.(?:inf|Inf|INF)$|^\.(?:nan|NaN|NAN)$"),
+    list("-+0123456789."),
+)
+
+
+def builtin_path(space: str) -> Path:
+    return BUILTIN_DIR / f"{space}.yaml"
+
+
+def builtin_spaces() -> tuple[str, ...]:
+    return tuple(sorted(p.stem for p in BUILTIN_DIR.glob("*.yaml")))
+
+
+def load(path: str | Path, text: str | None = None) -> SweepFile:
+    """The sweep file at ``path``, checked (both passes); a SweepFileError says what is wrong, where."""
+    path = Path(path)
+    if text is None:
+        try:
+            text = path.read_text()
+        except OSError as e:
+            raise SweepFileError(f"{path}: cannot be read ({e.strerror})") from None
+    try:
+        node = yaml.compose(text, Loader=_Loader)
+        data = yaml.load(text, Loader=_Loader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise SweepFileError(f"{where}: not valid YAML: {getattr(e, 'problem', None) or e}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise SweepFileError(f"{path}: a sweep file is a mapping of keys (task, algo, grid, ...), not a "
+                             f"{type(data).__name__}")
+    try:
+        sweep = SweepFile.model_validate(data)
+    except ValidationError as e:
+        raise SweepFileError(_first_error(e, path, node)) from None
+    try:
+        check_fields(sweep)
+    except FieldError as e:
+        raise SweepFileError(f"{_where(path, node, e.loc)}: {_dotted(e.loc)}: {e.message}") from None
+    return sweep
+
+
+def _first_error(e: ValidationError, path: Path, node) -> str:
+    err = e.errors()[0]
+    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith(("<", "function-"))))
+    if err["type"] == "extra_forbidden":
+        parent = _model_at(loc[:-1])
+        accepted = list(parent.model_fields) if parent else []
+        close = difflib.get_close_matches(str(loc[-1]), accepted, n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        msg = f"unknown key {loc[-1]!r}{hint}; accepted: {', '.join(accepted)}"
+    else:
+        msg = err["msg"].removeprefix("Value error, ")
+    return f"{_where(path, node, loc)}: {_dotted(loc) or '(top level)'}: {msg}"
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The schema model a key path points into (for the accepted keys of an unknown-key error)."""
+    inner = {"seeds": Seeds, "task": UserEnv, "groups": Group, "groups_at": GroupsAt, "search": Distribution}
+    mappings = {"groups", "search"}  # field → {name: model}: the next part is a name, not a key
+    model, skip = SweepFile, False
+    for part in loc:
+        if skip or isinstance(part, int):
+            skip = False
+            continue
+        model, skip = inner.get(part, model), part in mappings
+    return model
+
+
+def _dotted(loc: tuple) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
+
+
+def _where(path: Path, node, loc: tuple) -> str:
+    """``FILE:LINE`` of the deepest key of ``loc`` the YAML has (a short form such as ``task: X``
+    has no list, so the path stops where the file does)."""
+    line = None
+    for part in loc:
+        if isinstance(node, yaml.MappingNode):
+            pair = next(((k, v) for k, v in node.value if k.value == str(part)), None)
+            if pair is None:
+                break
+            line, node = pair[0].start_mark.line + 1, pair[1]
+        elif isinstance(node, yaml.SequenceNode) and isinstance(part, int) and part < len(node.value):
+            node = node.value[part]
+            line = node.start_mark.line + 1
+        else:
+            break
+    return f"{path}:{line}" if line else str(path)
+
+
+def to_plain(v: Any) -> Any:
+    """Tuples as lists (YAML), recursively."""
+    if isinstance(v, dict):
+        return {k: to_plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [to_plain(x) for x in v]
+    return v
+
+
+def to_field_value(v: Any) -> Any:
+    """A value from a file as a config field holds it: lists become tuples (layer sizes)."""
+    if isinstance(v, (list, tuple)):
+        return tuple(to_field_value(x) for x in v)
+    return v
+
+
+# ----------------------------------------------------------------------------- the fields
+
+
+class FieldError(ValueError):
+    def __init__(self, loc: tuple, message: str):
+        super().__init__(message)
+        self.loc, self.message = loc, message
+
+
+def check_fields(sweep: SweepFile) -> None:
+    """Every field the sweep sets, sweeps or searches, against the declaration of each algorithm
+    that runs it (its docstring'd ``param(..., accepts=...)``): raises FieldError at its key path."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD
+
+    top_algos = _algos_of(sweep.algo, sweep.set, {}, ("set",))
+    if sweep.search is not None:
+        algos = top_algos
+        if ALGO_FIELD in sweep.search:
+            algos = _algos_of(top_algos, {}, {ALGO_FIELD: sweep.search[ALGO_FIELD].values_to_check()},
+                              ("search", ALGO_FIELD))
+        _check_set(sweep.set, algos, ("set",))
+        for name, dist in sweep.search.items():
+            if name != ALGO_FIELD:
+                for value in dist.values_to_check():
+                    _check_field(name, value, algos, ("search", name, dist.kind))
+        return
+    groups = [("grid", None, Group(grid=sweep.grid))] if sweep.grid is not None else []
+    groups += [(("groups", g), g, grp) for g, grp in (sweep.groups or {}).items()]
+    groups += [(("groups_at", i, "groups", g), g, grp) for i, at in enumerate(sweep.groups_at)
+               for g, grp in at.groups.items()]
+    # The sweep's set reaches every trial: each algorithm any group runs must have its fields.
+    run_by_groups = [a for _, _, g in groups for a in _algos_of(top_algos, g.set, g.grid, ("set",))]
+    _check_set(sweep.set, tuple(dict.fromkeys(run_by_groups or top_algos)), ("set",))
+    for where, _, group in groups:
+        where = where if isinstance(where, tuple) else (where,)
+        prefix = where if where == ("grid",) else (*where, "grid")
+        if ALGO_FIELD in group.grid and len(sweep.algo) > 1:
+            raise FieldError((*prefix, ALGO_FIELD), f"algo is swept here and the sweep's algo is a list "
+                                                    f"{list(sweep.algo)}; give one of them")
+        set_loc = (*where, "set") if where != ("grid",) else ("set",)
+        algos = _algos_of(top_algos, group.set, group.grid, prefix if ALGO_FIELD in group.grid else set_loc)
+        _check_set(group.set, algos, set_loc)
+        for name, values in group.grid.items():
+            if name != ALGO_FIELD:
+                for i, value in enumerate(values):
+                    _check_field(name, value, algos, (*prefix, name, i))
+
+
+def _algos_of(top: tuple, sets: dict, grid: dict, loc: tuple) -> tuple[str, ...]:
+    """The algorithms a location runs: a swept ``algo``, else a set one, else the sweep's."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD, ALGOS
+
+    if ALGO_FIELD in grid:
+        algos = tuple(grid[ALGO_FIELD])
+    elif ALGO_FIELD in sets:
+        algos = (sets[ALGO_FIELD],)
+    else:
+        return tuple(top)
+    bad = [a for a in algos if a not in ALGOS]
+    if bad:
+        raise FieldError((*loc, ALGO_FIELD), f"unknown algo {bad[0]!r}; accepted: {' | '.join(ALGOS)}")
+    return algos
+
+
+def _check_set(sets: dict, algos: tuple, loc: tuple) -> None:
+    from lac_rllib.algorithms.registry import ALGO_FIELD
+
+    for name, value in sets.items():
+        if name != ALGO_FIELD:
+            _check_field(name, value, algos, (*loc, name))
+
+
+def _check_field(name: str, value: Any, algos: tuple, loc: tuple) -> None:
+    from lac_rllib.algorithms.registry import ALGOS, algo_config
+
+    for algo in algos:
+        fields = algo_config(algo).FIELDS
+        if name not in fields.names:
+            owners = [a for a in ALGOS if a != algo and name in algo_config(a).FIELDS.names]
+            if owners:
+                raise FieldError(loc[:loc.index(name) + 1],
+                                 f"a field of {' and '.join(owners)}, not of {algo} (which this trial runs); "
+                                 f"fields of {algo}: docs/config.md")
+            close = difflib.get_close_matches(name, sorted(fields.names), n=1)
+            raise FieldError(loc[:loc.index(name) + 1],
+                             f"unknown {algo} field {name!r}{f' (did you mean {close[0]}?)' if close else ''}; "
+                             f"accepted: the fields of docs/config.md ({', '.join(sorted(fields.names))})")
+        try:
+            fields.check(name, to_field_value(value))
+        except ValueError as e:
+            raise FieldError(loc, str(e)) from None
+
+
+# ----------------------------------------------------------------------------- the reference
+
+
+def reference_markdown() -> str:
+    """docs/sweeps.md's "Sweep file reference": every key of every part of the schema, from its
+    docstring (test_docs keeps the file in sync: ``python -m sweeps.sweep_file``)."""
+    lines = []
+    for model in (SweepFile, Group, GroupsAt, Seeds, Distribution, UserEnv):
+        lines += [f"#### `{model.__name__}`", "", " ".join((model.__doc__ or "").split()), "",
+                  "| key | type | default | what it is |", "|---|---|---|---|"]
+        for name, f in model.model_fields.items():
+            default = "required" if f.is_required() else "–" if f.default is None else f"`{to_plain(f.default)!r}`"
+            kind = _type_text(Annotated[(f.annotation, *f.metadata)] if f.metadata else f.annotation)
+            text = " ".join((f.description or "").split())
+            cells = [f"`{name}`", kind, default, text]
+            lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _type_text(t: Any) -> str:
+    """A field's type as a reader says it: ``list of int >= 0``, ``mapping str → list of any``."""
+    import types
+    import typing
+
+    import annotated_types
+
+    origin, args = typing.get_origin(t), typing.get_args(t)
+    if origin is Annotated:
+        base = _type_text(args[0])
+        for meta in args[1:]:
+            for cls, op in ((annotated_types.Gt, ">"), (annotated_types.Ge, ">=")):
+                if isinstance(meta, cls):
+                    base += f" {op} {getattr(meta, cls.__name__.lower())}"
+        return base
+    if origin in (typing.Union, types.UnionType):
+        return " | ".join(_type_text(a) for a in args if a is not type(None))
+    if origin is Literal:
+        return " | ".join(map(str, args))
+    if origin is tuple:
+        return f"list of {_type_text(args[0])}" if args[-1] is Ellipsis else f"[{', '.join(map(_type_text, args))}]"
+    if origin is dict:
+        return f"mapping {_type_text(args[0])} → {_type_text(args[1])}"
+    if t is Any:
+        return "any"
+    if t is type(None):
+        return "null"
+    return getattr(t, "__name__", str(t))
+
+
+REFERENCE_BEGIN = "<!-- sweep-file reference: generated by `python -m sweeps.sweep_file` -->"
+REFERENCE_END = "<!-- end of the sweep-file reference -->"
+
+
+def write_reference(doc: Path) -> bool:
+    """Rewrite the generated part of ``doc``; True if it changed."""
+    text = doc.read_text()
+    head, _, rest = text.partition(REFERENCE_BEGIN)
+    _, _, tail = rest.partition(REFERENCE_END)
+    new = f"{head}{REFERENCE_BEGIN}\n\n{reference_markdown()}\n{REFERENCE_END}{tail}"
+    doc.write_text(new)
+    return new != text
+
+
+if __name__ == "__main__":
+    doc = Path(__file__).parents[1] / "docs" / "sweeps.md"
+    print(doc, "updated" if write_reference(doc) else "unchanged")
