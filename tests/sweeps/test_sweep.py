@@ -508,3 +508,17 @@ def test_a_sweep_on_a_users_own_env_lands_in_mlflow_and_restores(ray_session, tm
     out = capsys.readouterr().out
     result = json.loads(out.strip().splitlines()[-1])
     assert code == 0 and result["task"] == "mine/Line-v0" and result["episodes"] == 2, out
+
+
+@pytest.mark.slow
+def test_a_safety_gymnasium_task_new_to_the_registry_runs_a_smoke_trial(ray_session, tmp_path):
+    """SafetyCarCircle1-v0 (500-step episodes, walls as the cost) was not a task before sweep files."""
+    path = tmp_path / "circle.yaml"
+    path.write_text("task: SafetyCarCircle1-v0\nbudget: smoke\nseeds: 1\nset: {env_steps_per_iteration: 1000}\n")
+    args = cli.parse_args(["--config", str(path), "--experiment", "test",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")])
+    assert _sweep(tmp_path, args) == 0
+    client, _, (child,) = _runs(tmp_path)
+    assert child.info.status == "FINISHED" and child.data.params["task"] == "SafetyCarCircle1-v0"
+    assert child.data.metrics["cost_limit"] == 25.0 and child.data.metrics["env_steps"] >= 2000
+    assert [m.value for m in client.get_metric_history(child.info.run_id, "episode_cost")], "an episode completed"
