@@ -24,6 +24,7 @@ class Infra:
     resume: bool
     max_failures: int
     optuna_seed: int
+    optuna_storage: str | None = None  #: as given (None: beside the MLflow store)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +44,10 @@ class Plan:
     name: str  #: the sweep's name: its Tune directory under ``storage`` and its MLflow parent run
     storage: str
     optuna_storage: str | None  #: a search's Optuna storage URL
+    #: ``--confirm-top``: (K, seeds, budget) of the confirmation that follows the sweep (sweeps/confirm.py)
+    confirm: tuple | None = None
+    #: A confirmation sweep's winners (sweeps/confirm.py ``winners``): its report says whether each held up.
+    confirms: tuple | None = None
 
     @property
     def task(self) -> str | None:
@@ -71,7 +76,7 @@ class Plan:
 
     def record(self) -> dict:
         """The plan as JSON-ready data (``sweep.json``, the parent run's plan.json): the trials by label."""
-        skip = ("trials", "sweep", "infra")
+        skip = ("trials", "sweep", "infra", "confirms")
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
         return out | {"tracking_uri": self.tracking_uri, "budget": self.budget, "seeds": list(self.seeds),
                       "trial_labels": [t.label() for t in self.trials] if self.trials else None}

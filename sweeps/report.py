@@ -214,8 +214,9 @@ def algorithm_comparison(summary: pd.DataFrame) -> str:
     return "\n\n".join(out) + "\n"
 
 
-def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: int = 7900) -> str:
-    """The parent run's note: what the sweep found, readable on its MLflow page.
+def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: int = 7900, extra: str = "") -> str:
+    """The parent run's note: what the sweep found, readable on its MLflow page; ``extra`` (the
+    importances, the safety statistics, ...) goes below the best configuration.
 
     MLflow cuts a tag at 8000 characters, so rows beyond ``limit`` are left to summary.md.
     """
@@ -224,6 +225,8 @@ def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: 
     best = best_configuration(summary)
     head = [heading, "", (f"**Best feasible configuration:** {_describe(best)}" if best else
                           "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)"), ""]
+    if extra:
+        head += [extra, ""]
     if one_task:
         head += [f"Task `{tasks[0]}`; final return and cost per configuration over its seeds:", ""]
     head += [seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
@@ -237,7 +240,7 @@ def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: 
     while len(text) > limit and len(rows) > 2:  # keep the head and the footer, drop rows from the end
         rows.pop()
         text = "\n".join(head + rows + ["", f"… {len(summary) - len(rows) + 2} more rows in summary/summary.md"] + tail)
-    return text
+    return text if len(text) <= limit else text[:limit - 40] + "\n… (the rest: summary/summary.md)"
 
 
 def _panels(trials: pd.DataFrame, swept_only: bool) -> list[tuple[str, str, pd.DataFrame]]:
@@ -417,20 +420,96 @@ def trial_curve(curve_df: pd.DataFrame, path, title: str) -> str:
     return _save(fig, path)
 
 
-def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir) -> dict[str, str]:
-    """Write summary.csv/.md, best.json, trials.csv and the plots; return {file name: path}."""
+def with_safety(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> pd.DataFrame:
+    """The summary with each configuration's safety statistics (sweeps/safety.py: P(feasible at the
+    end) with its Wilson interval, the violation over training, the worst iteration, the spread of
+    the final cost), its place on the reward-cost frontier and its chain-health flags."""
+    from sweeps.chain_health import chain_flags
+    from sweeps.frontier import frontier
+    from sweeps.safety import safety_table
+
+    def key(values) -> tuple:
+        return tuple("" if _is_na(v) else str(v) for v in values)
+
+    safety = safety_table(trials, curves)
+    by_key = {key(r[k] for k in KEYS): r for r in safety.to_dict("records")}
+    cols = [c for c in safety.columns if c not in KEYS and c != "n_seeds"]
+    out = summary.copy()
+    rows = [by_key.get(key(r[k] for k in KEYS), {}) for r in out.to_dict("records")]
+    for c in cols:
+        out[c] = [r.get(c, math.nan) for r in rows]
+    out["on_frontier"] = frontier(out).to_numpy()
+    flags = {key(k): v for k, v in chain_flags(trials).items()}
+    out["chain_flags"] = [flags.get(key(r[k] for k in KEYS), "") for r in out.to_dict("records")]
+    return out
+
+
+def safety_markdown(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> str:
+    """Per configuration: P(feasible at the end) [Wilson 95%], the violation during training and the
+    worst iteration, the final cost's spread, and chain-health flags where there are any."""
+    s = with_safety(summary, trials, curves)
+    lines = ["**Safety per configuration** (P(feasible at the end) with a Wilson 95% interval; violation = "
+             "Σ over iterations of max(0, cost − limit), mean over seeds; the worst iteration over its seeds):", "",
+             "| configuration | P(feasible) [95%] | violation | worst iteration (excess @ env steps) "
+             "| final cost min–max | frontier | chain |", "|---|---:|---:|---:|---:|---|---|"]
+    for r in s.to_dict("records"):
+        p = "–" if _is_na(r.get("p_feasible")) else (f"{r['p_feasible']:.2f} [{r['p_feasible_low']:.2f}, "
+                                                    f"{r['p_feasible_high']:.2f}]")
+        worst = "–" if _is_na(r.get("worst_excess")) else f"{r['worst_excess']:+.2f} @ {r['worst_env_steps']:,.0f}"
+        spread = "–" if _is_na(r.get("final_cost_min")) else f"{r['final_cost_min']:.2f}–{r['final_cost_max']:.2f}"
+        cells = [_what(r) if r["param"] else f"{r['group']}", p, _fmt_num(r.get("violation_total")), worst, spread,
+                 "yes" if r.get("on_frontier") else "", r.get("chain_flags") or ""]
+        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def importance_markdown(trials: pd.DataFrame, fields: tuple[str, ...]) -> str:
+    """The top three fields for return and for cost (fANOVA over the configurations), or ""
+    when the sweep varies nothing."""
+    if not fields:
+        return ""
+    from sweeps.importance import importance_line, importances
+
+    return importance_line(importances(trials, list(fields)))
+
+
+def pareto_markdown(pareto: list[dict]) -> str:
+    """A multi-objective search's Pareto set, one row per configuration."""
+    lines = [f"**Pareto set** of the multi-objective search ({len(pareto)} configurations, return up, cost down; "
+             "the limit as a constraint):", "", "| trial | sampled values | return | cost | within the limit |",
+             "|---:|---|---:|---:|---|"]
+    for t in sorted(pareto, key=lambda t: t[EPISODE_COST]):
+        values = ", ".join(f"{k}={_fmt_value(v)}" for k, v in t["params"].items())
+        c = t.get("constraint")
+        lines.append(f"| {t['number']} | {values} | {_fmt_num(t[EPISODE_RETURN])} | {_fmt_num(t[EPISODE_COST])} | "
+                     f"{'–' if c is None else 'yes' if c <= 0 else 'no'} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir, fields: tuple[str, ...] = ()) -> dict[str, str]:
+    """Write summary.csv/.md (with the safety statistics), best.json, trials.csv, the plots, the
+    reward-cost frontier (PNG and interactive HTML) and, where the sweep varies ``fields``, which of
+    them matter (importance.png/.html); return {file name: path}."""
+    from sweeps.frontier import frontier_html, frontier_png
+    from sweeps.importance import importance_plots
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    summary = summarize(trials)
+    summary = with_safety(summarize(trials), trials, curves)
     best = best_configuration(summary)
     summary.to_csv(out / "summary.csv", index=False)
-    (out / "summary.md").write_text(markdown_table(summary), encoding="utf-8")
+    (out / "summary.md").write_text(markdown_table(summary) + "\n" + safety_markdown(summarize(trials), trials, curves)
+                                    + ("\n" + importance_markdown(trials, fields) if fields else ""), encoding="utf-8")
     (out / "best.json").write_text(json.dumps(best if best else {"best": None}, indent=2) + "\n")
     trials.to_csv(out / "trials.csv", index=False)
     paths = {n: str(out / n) for n in ("summary.csv", "summary.md", "best.json", "trials.csv")}
     for name, made in (("cost_boxplots.png", cost_box_plots(trials, out / "cost_boxplots.png")),
                        ("aggregates.png", aggregate_plots(summary, out / "aggregates.png")),
-                       ("learning_curves.png", learning_curves(trials, curves, out / "learning_curves.png"))):
+                       ("learning_curves.png", learning_curves(trials, curves, out / "learning_curves.png")),
+                       ("frontier.png", frontier_png(summary, out / "frontier.png")),
+                       ("frontier.html", frontier_html(summary, out / "frontier.html"))):
         if made:
             paths[name] = made
+    if fields:
+        paths.update(importance_plots(trials, list(fields), out))
     return paths

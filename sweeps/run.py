@@ -94,6 +94,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--optuna-storage", default=None,
                    help="Optuna storage URL of a search's study (default: optuna.db beside a local MLflow "
                         "store, else in --storage); open it with optuna-dashboard URL")
+    p.add_argument("--confirm-top", type=_int_at_least(1), default=None, metavar="K",
+                   help="after the sweep, rerun its K best feasible configurations (by the lower end of the "
+                        "return interval) beside the default on fresh seeds (sweeps/confirm.py)")
+    p.add_argument("--confirm-seeds", type=_int_at_least(1), default=None, metavar="N",
+                   help="seeds of the confirmation (default: the sweep's count, at least 3)")
+    p.add_argument("--confirm-budget", type=_budget, default=None, metavar="BUDGET",
+                   help="the confirmation's budget: the sweep's (default) or a larger one")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
                         "algo=ppo_lag|sac_lag runs a baseline (fields: docs/config.md)")
@@ -153,17 +160,13 @@ def check_shared(uri: str, storage: str, source: str | None = "--address") -> No
 def make_plan(args) -> Plan:
     """The one pass from the command line to the trials: file and flags → the resolved sweep
     (:func:`resolve_sweep`) → its trials with their full configs (``spaces.trial_params``) → the
-    estimate and where it goes. Every input is checked here, before Ray starts."""
+    estimate and where it goes (:func:`plan_sweep`). Every input is checked here, before Ray starts."""
     sweep, space = resolve_sweep(args)
     address = args.address or os.environ.get("RAY_ADDRESS") or None
     infra = Infra(address=address, address_from="--address" if args.address else "RAY_ADDRESS" if address else None,
                   tracking_uri=args.tracking_uri or default_tracking_uri(), storage=args.storage,
-                  resume=args.resume, max_failures=args.max_failures, optuna_seed=args.optuna_seed)
-    cpus = sweep.cpus_per_trial
-    if not address and cpus > (os.cpu_count() or 1):
-        # Tune would keep such a trial PENDING forever on the local Ray this command starts.
-        raise ValueError(f"--cpus-per-trial {cpus} is more than this machine's {os.cpu_count()} CPUs; "
-                         f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
+                  resume=args.resume, max_failures=args.max_failures, optuna_seed=args.optuna_seed,
+                  optuna_storage=args.optuna_storage)
     check_address(address, infra.address_from)
     check_storage(args.storage)
     if address not in (None, "local"):
@@ -171,6 +174,20 @@ def make_plan(args) -> Plan:
     check_reachable(infra.tracking_uri)
     # A user's env module is looked up on the Python path, then beside the sweep file, then here.
     search_dirs = ((str(Path(args.config).resolve().parent),) if args.config else ()) + (os.getcwd(),)
+    plan = plan_sweep(sweep, space, infra, search_dirs)
+    if args.confirm_top:
+        plan = dataclasses.replace(plan, confirm=check_confirm(plan, args))
+    return plan
+
+
+def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = ()) -> Plan:
+    """A resolved sweep's plan: its tasks (a user's env built and stepped once), its trials with
+    their fields resolved, the estimate, its name and storage."""
+    cpus = sweep.cpus_per_trial
+    if not infra.address and cpus > (os.cpu_count() or 1):
+        # Tune would keep such a trial PENDING forever on the local Ray this command starts.
+        raise ValueError(f"--cpus-per-trial {cpus} is more than this machine's {os.cpu_count()} CPUs; "
+                         f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
     tasks, user_tasks = resolve_tasks(sweep, search_dirs)
     sets = trial_sets(sweep)
     trials = None
@@ -191,14 +208,28 @@ def make_plan(args) -> Plan:
     name = sweep.name
     optuna_storage = None
     if sweep.is_search:
-        optuna_storage = args.optuna_storage or default_optuna_storage(infra.tracking_uri, args.storage)
-        check_optuna_study(optuna_storage, name, args.resume)
+        optuna_storage = infra.optuna_storage or default_optuna_storage(infra.tracking_uri, infra.storage)
+        check_optuna_study(optuna_storage, name, infra.resume)
     return Plan(
         sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
         n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=max(t.timesteps for t in first),
         estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
-        name=name, storage=str(Path(args.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
+        name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
     )
+
+
+def check_confirm(plan: Plan, args) -> tuple[int, int, str | int]:
+    """``--confirm-top K [--confirm-seeds N] [--confirm-budget B]`` checked before Ray starts: one
+    task, a budget at least the sweep's (a smaller one would confirm something else)."""
+    if len(plan.tasks) != 1:
+        raise ValueError(f"--confirm-top with {len(plan.tasks)} tasks: a confirmation reruns one task's winners; "
+                         "accepted: a sweep of one task")
+    budget = args.confirm_budget if args.confirm_budget is not None else plan.sweep.budget
+    steps = spaces.get_budget(budget).for_task(plan.tasks[0])[0]
+    if steps < plan.timesteps:
+        raise ValueError(f"--confirm-budget {budget}: {steps:,} env steps is less than the sweep's {plan.timesteps:,}; "
+                         "accepted: the same or a larger budget")
+    return args.confirm_top, args.confirm_seeds or max(len(plan.seeds), 3), budget
 
 
 def resolve_sweep(args) -> tuple[SweepFile, str]:
@@ -446,10 +477,57 @@ def main(argv=None) -> int:
         print_plan(plan)
         from sweeps.sweep import run_sweep
 
-        return run_sweep(plan, sweep_dir, git_commit())
+        rc = run_sweep(plan, sweep_dir, git_commit())
     finally:
         if lock is not None:
             lock.release()
+    if rc == 0 and plan.confirm:
+        rc = run_confirmation(plan, sweep_dir, git_commit())
+    return rc
+
+
+def run_confirmation(plan: Plan, sweep_dir: Path, commit: str) -> int:
+    """``--confirm-top``: the finished sweep's K best feasible configurations (read back from MLflow,
+    ranked by the lower end of their return interval) rerun beside the default on fresh seeds, as
+    the sweep NAME-confirm with its own parent run, whose note says whether each held up."""
+    import json
+
+    from sweeps import confirm
+    from sweeps.report import summarize
+    from sweeps.results import sweep_results
+    from sweeps.sweep import run_sweep
+    from sweeps.tracking import SweepTracker
+
+    k, seeds, budget = plan.confirm
+    fields = confirm.varied_fields(plan.sweep)
+    tracker = SweepTracker(plan.tracking_uri, plan.experiment)
+    parent = json.loads((sweep_dir / SWEEP_FILE).read_text())["parent_run_id"]
+    trials, _ = sweep_results(tracker, parent, tuple(fields))
+    fields_of = {r["config"]: {f: r[f] for f in fields if f in r and not _missing(r[f])}
+                 for r in trials.to_dict("records")}
+    top = confirm.winners(summarize(trials), fields_of, k) if len(trials) else []
+    if not top:
+        print("confirmation: no feasible configuration other than the default to confirm", flush=True)
+        return 0
+    name = f"{plan.name}-confirm"
+    cfile = confirm.confirmation_file(plan.sweep, top, seeds, budget, name)
+    cdir = Path(plan.storage) / name
+    infra = dataclasses.replace(plan.infra, resume=(cdir / SWEEP_FILE).exists())
+    cplan = dataclasses.replace(plan_sweep(cfile, "confirm", infra), confirms=tuple(top))
+    print(f"confirmation of {plan.name}: its {len(top)} best feasible configuration(s) on seeds "
+          f"{cplan.seeds[0]}..{cplan.seeds[-1]}", flush=True)
+    print_plan(cplan)
+    tracker.client.set_tag(parent, "lac.confirmed_by", name)
+    lock = DriverLock(cdir)
+    lock.acquire()
+    try:
+        return run_sweep(cplan, cdir, commit)
+    finally:
+        lock.release()
+
+
+def _missing(v) -> bool:
+    return v is None or (isinstance(v, float) and v != v)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ import os
 import platform
 import signal
 import sys
-import tempfile
 from pathlib import Path
 
 import ray
@@ -19,29 +18,21 @@ from ray.tune.search import Repeater
 from ray.tune.search.optuna import OptunaSearch
 
 from lac_rllib.constrained.cpus import run_resources
-from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE
+from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN
 from sweeps import spaces
 from sweeps.live_table import LiveTable
 from sweeps.plan import Plan
 from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
+from sweeps.results import close_sweep
 from sweeps.tracking import (
-    CONFIG_ID_TAG,
-    CONFIG_TAG,
-    DEFAULT_TAG,
-    P_ALGO,
-    P_GROUP,
-    P_SEED,
-    P_SWEPT_PARAM,
-    P_SWEPT_VALUE,
-    P_TASK,
     STATUS_TAG,
     STOPPED_TAG,
     SweepTracker,
-    learning_curve,
 )
 from sweeps.trainable import CONSTRAINT, OBJECTIVE, LACTrainable, objective
 
 METRIC, MODE = OBJECTIVE, "max"
+MULTI_OBJECTIVES = (EPISODE_RETURN, EPISODE_COST)  # a multi-objective search's, maximised and minimised
 
 
 class ConstrainedOptunaSearch(OptunaSearch):
@@ -82,8 +73,10 @@ class SeedRepeater(Repeater):
             self.searcher.on_trial_complete(group.primary_trial_id, result=None, error=True)
             return
         ret, cost, limit = (sum(col) / len(seeds) for col in zip(*seeds))
+        # The one objective of a single-objective search, and return and cost of a multi-objective one.
         self.searcher.on_trial_complete(group.primary_trial_id, result={
-            METRIC: objective(ret, cost, limit), CONSTRAINT: cost - limit, "n_seeds": len(seeds)})
+            METRIC: objective(ret, cost, limit), EPISODE_RETURN: ret, EPISODE_COST: cost, CONSTRAINT: cost - limit,
+            "n_seeds": len(seeds)})
 
 
 def versions() -> dict:
@@ -187,9 +180,12 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
               f"as KILLED); resume with --resume", file=sys.stderr, flush=True)
         return 130
     stopped = close_open_children(tracker, parent, "FINISHED", tags={STOPPED_TAG: "1"})  # ASHA's early stops
+    seeds = plan.seeds
+    seed_text = (f"seeds {seeds[0]}..{seeds[-1]}" if seeds == tuple(range(seeds[0], seeds[-1] + 1))
+                 else f"seeds {', '.join(map(str, seeds))}")
     outcome = (f"{n_done} of {plan.n_trials} trials finished ({stopped} stopped early by the scheduler), "
-               f"{n_errors} failed")
-    close_sweep(tracker, parent, n_errors, heading=f"**Sweep `{plan.name}`**: {outcome}.")
+               f"{n_errors} failed; {seed_text}")
+    close_sweep(tracker, parent, n_errors, heading=f"**Sweep `{plan.name}`**: {outcome}.", plan=plan)
     print(f"sweep done: {outcome}; MLflow parent run {parent}")
     print_links(links, plan.tracking_uri)
     return 0
@@ -224,9 +220,13 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
         # The study lives in its own storage (plan.optuna_storage) under the sweep's name:
         # optuna-dashboard opens it, and a resumed sweep goes on with the same study. TPE reads
         # the constraint each configuration is told (ConstrainedOptunaSearch); random ignores it.
-        sampler = {"tpe": optuna.samplers.TPESampler, "random": optuna.samplers.RandomSampler}[sweep.searcher]
+        # A multi-objective search (motpe, nsga2) has two: return up, cost down; its result is the
+        # study's Pareto set (sweeps/report.py, pareto.json), the constraint marking the feasible part.
+        sampler = {"tpe": optuna.samplers.TPESampler, "motpe": optuna.samplers.TPESampler,
+                   "random": optuna.samplers.RandomSampler, "nsga2": optuna.samplers.NSGAIISampler}[sweep.searcher]
+        metric, mode = ((list(MULTI_OBJECTIVES), ["max", "min"]) if sweep.multi_objective else (METRIC, MODE))
         optuna_search = ConstrainedOptunaSearch(sampler=sampler(seed=infra.optuna_seed),
-                                                metric=METRIC, mode=MODE, study_name=plan.name,
+                                                metric=metric, mode=mode, study_name=plan.name,
                                                 storage=optuna.storages.RDBStorage(plan.optuna_storage))
         search = SeedRepeater(optuna_search, repeat=len(plan.seeds))
     scheduler = (ASHAScheduler(time_attr=ENV_STEPS, metric=METRIC, mode=MODE, max_t=plan.timesteps,
@@ -254,53 +254,3 @@ def close_open_children(tracker: SweepTracker, parent: str, status: str, tags: d
             tracker.client.set_terminated(run.info.run_id, status=status)
             n += 1
     return n
-
-
-def param_value(text: str):
-    """A logged param as its value: JSON for numbers and None, the text itself for a string
-    (sweeps.tracking logs strings as they are, e.g. a swept ``algo``)."""
-    try:
-        return json.loads(text)
-    except ValueError:
-        return text
-
-
-def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str) -> None:
-    """Summary table, best configuration and plots on the parent run, read back from MLflow
-    (the record of every trial, resumed ones included); the summary is the parent run's note."""
-    import pandas as pd
-
-    from sweeps.report import algorithm_comparison, note_markdown, summarize, write_sweep_reports
-
-    rows, curves = [], {}
-    for run in tracker.children(parent):
-        p, m, tid = run.data.params, run.data.metrics, run.data.tags.get("lac.trial_id", run.info.run_id)
-        value = param_value(p.get(P_SWEPT_VALUE, "null"))
-        rows.append({"trial_id": tid, "group": p.get(P_GROUP, ""), "param": p.get(P_SWEPT_PARAM, ""), "value": value,
-                     "task": p.get(P_TASK), "seed": int(p.get(P_SEED, 0)), "algo": p.get(P_ALGO, "lac"),
-                     "config": run.data.tags.get(CONFIG_TAG, ""), "config_id": run.data.tags.get(CONFIG_ID_TAG, ""),
-                     "default": run.data.tags.get(DEFAULT_TAG) == "1",
-                     "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
-                     if run.info.status == "FINISHED" else "ERROR",
-                     **{k: m.get(k, float("nan")) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE,
-                                                            OBJECTIVE)},
-                     **{k: p[k] for k in ("langevin_steps", "langevin_step_size", "temperature", "beta") if k in p}})
-        curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
-    trials = pd.DataFrame(rows)
-    with tempfile.TemporaryDirectory() as tmp:
-        if len(trials):
-            write_sweep_reports(trials, curves, tmp)
-        tracker.client.log_artifacts(parent, tmp, "summary")
-    footer = ("Files: `summary/summary.md` (every column), `summary/aggregates.png` (these statistics), "
-              "`summary/cost_boxplots.png`, `summary/learning_curves.png`; one child run per trial (group them "
-              "by the tag `lac.config` in the runs table to see one averaged curve per configuration).")
-    if len(trials):
-        summary = summarize(trials)
-        note = note_markdown(summary, heading, footer)
-        comparison = algorithm_comparison(summary)
-        if comparison:  # the algorithms side by side lead the note (MLflow cuts a tag at 8000 characters)
-            note = note.replace(heading, heading + "\n\n" + comparison, 1)[:7990]
-    tracker.set_note(parent, note if len(trials) else heading)
-    tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
-    tracker.client.set_tag(parent, STATUS_TAG, "finished")
-    tracker.client.set_terminated(parent, status="FINISHED")

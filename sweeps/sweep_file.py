@@ -41,7 +41,9 @@ from pydantic import (
 
 BUILTIN_DIR = Path(__file__).with_name("builtin")
 BUDGET_NAMES = ("smoke", "quick", "paper")
-SEARCHERS = ("grid", "random", "tpe")
+SEARCHERS = ("grid", "random", "tpe", "motpe", "nsga2")
+#: Searchers over two objectives (return up, cost down; the limit as a constraint): the Pareto set.
+MULTI_OBJECTIVE = ("motpe", "nsga2")
 Scalar = bool | int | float | str | None
 
 
@@ -235,9 +237,11 @@ class SweepFile(BaseModel):
     """Groups used instead of ``groups`` at a budget and task preset (the first match wins)."""
     search: dict[str, Distribution] | None = Field(None, min_length=1)
     """field → distribution, sampled ``num_samples`` times by ``searcher``."""
-    searcher: Literal["grid", "random", "tpe"] | None = None
+    searcher: Literal["grid", "random", "tpe", "motpe", "nsga2"] | None = None
     """``grid`` (``grid``/``groups``; the default without ``search``), ``random`` (Optuna's random
-    sampler) or ``tpe`` (Optuna's TPE with the feasibility constraint; the default with ``search``)."""
+    sampler), ``tpe`` (Optuna's TPE on one objective with the feasibility constraint; the default with
+    ``search``), or a multi-objective search on return and cost with the constraint, whose result is
+    the Pareto set: ``motpe`` (Optuna's TPE on two objectives) or ``nsga2`` (NSGA-II)."""
     num_samples: PositiveInt | None = None
     """Configurations a search samples (each trained with every seed); default 20."""
     scheduler: Literal["none", "asha"] | None = None
@@ -290,18 +294,25 @@ class SweepFile(BaseModel):
                 raise ValueError("give search or grid/groups, not both")
             if self.searcher == "grid":
                 raise ValueError("searcher grid samples nothing: it runs grid/groups; "
-                                 "accepted with search: random | tpe")
+                                 "accepted with search: random | tpe | motpe | nsga2")
+            if self.searcher in MULTI_OBJECTIVE and self.scheduler == "asha":
+                raise ValueError(f"scheduler asha with searcher {self.searcher}: Tune gives a multi-objective "
+                                 "search no intermediate results to stop trials by; accepted: scheduler none")
             if self.task is not None and len(self.task) > 1:
                 raise ValueError("a search optimises one task; run one sweep per task")
             if len(self.algo) > 1:
                 raise ValueError("a search runs one algorithm; search over it instead: search: {algo: {choice: [...]}}")
-        elif self.searcher in ("random", "tpe"):
+        elif self.searcher in ("random", "tpe", *MULTI_OBJECTIVE):
             raise ValueError(f"searcher {self.searcher} needs a search section (field → distribution)")
         return self
 
     @property
     def is_search(self) -> bool:
         return self.search is not None
+
+    @property
+    def multi_objective(self) -> bool:
+        return self.searcher in MULTI_OBJECTIVE
 
     def seed_list(self) -> tuple[int, ...]:
         return (self.seeds or Seeds(count=3)).values()

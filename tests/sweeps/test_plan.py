@@ -18,11 +18,13 @@ def _plan(tmp_path, monkeypatch, *argv):
 
 def test_the_default_ablation_is_what_the_readme_says(tmp_path, monkeypatch):
     plan = _plan(tmp_path, monkeypatch, "--space", "ablation")
-    assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 21)
+    assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 24)
     labels = {t.config_label() for t in plan.trials}
     assert labels == {f"NI-langevin_steps={t}-PointHazard-v0" for t in (20, 30)} | {
         f"VT-langevin_steps={t}-PointHazard-v0" for t in (10, 20, 30)} | {
-        f"PR-beta={b}-PointHazard-v0" for b in (0.5, 1.0)}
+        f"PR-beta={b}-PointHazard-v0" for b in (0.5, 1.0)} | {"unconstrained-PointHazard-v0"}
+    unconstrained = [t for t in plan.trials if t.group == "unconstrained"]
+    assert [(t.params["nu_lr"], t.params["nu_init"]) for t in unconstrained] == [(0.0, 0.0)] * 3
     defaults = [t.label() for t in plan.trials if t.default]
     assert defaults == [f"VT-langevin_steps=20-PointHazard-v0-s{s}" for s in range(3)]
     minutes = int(re.search(r"(\d+) trials, ~(\d+) min on 2 cores", FIRST_SCREEN).group(2))
@@ -36,7 +38,7 @@ def test_table_3_itself_is_the_paper_budget_and_says_what_it_costs(tmp_path, mon
                            "--storage", str(tmp_path / "ray_results")])
     monkeypatch.chdir(tmp_path)
     plan = cli.make_plan(args)
-    assert (plan.n_trials, plan.timesteps) == (48, 2_500_000)
+    assert (plan.n_trials, plan.timesteps) == (51, 2_500_000)  # Table 3 and the unconstrained arm
     readme_cpu_h = float(re.search(r"~(\d+)\s+CPU-hours by the plan's estimate", README).group(1))
     assert readme_cpu_h == pytest.approx(plan.estimated_cpu_h, rel=0.15)
     cli.print_plan(plan)

@@ -136,12 +136,25 @@ def test_plots_return_none_when_nothing_to_plot(tmp_path):
 
 def test_write_sweep_reports(tmp_path):
     trials, curves = sweep()
-    paths = report.write_sweep_reports(trials, curves, tmp_path / "out")
+    for field, other in (("langevin_steps", 20), ("beta", 1.0)):  # each trial's value of the swept fields
+        trials[field] = [v if p == field else other for p, v in zip(trials["param"], trials["value"])]
+    paths = report.write_sweep_reports(trials, curves, tmp_path / "out", fields=("langevin_steps", "beta"))
     names = {"summary.csv", "summary.md", "best.json", "trials.csv", "cost_boxplots.png", "learning_curves.png",
-             "aggregates.png"}
+             "aggregates.png", "frontier.png", "frontier.html", "importance.png", "importance.html",
+             *(f"{k}_{o}.png" for k in ("parallel", "slice") for o in ("return", "cost"))}
     assert set(paths) == names and all(Path(p).exists() for p in paths.values())
     n_configs = 4 + 4 + 4 + 1  # NI + VT (incl. the all-errored value 50) + PR + paper
-    assert len(pd.read_csv(paths["summary.csv"])) == n_configs
+    summary = pd.read_csv(paths["summary.csv"])
+    assert len(summary) == n_configs
+    # The safety statistics and the frontier are columns of the summary, and summary.md shows them.
+    assert {"p_feasible", "p_feasible_low", "violation_total", "worst_excess", "on_frontier", "chain_flags"} <= set(
+        summary.columns)
+    feasible = summary[summary["n_seeds"] > 0]
+    assert ((feasible["p_feasible_low"] <= feasible["p_feasible"]) & (feasible["p_feasible"] <= feasible[
+        "p_feasible_high"])).all()
+    assert summary.loc[summary["on_frontier"], "mean_feasible"].all() and summary["on_frontier"].any()
+    md = Path(paths["summary.md"]).read_text()
+    assert "**Safety per configuration**" in md and "**Hyperparameter importance**" in md
     assert len(pd.read_csv(paths["trials.csv"])) == len(trials)
     best = json.loads(Path(paths["best.json"]).read_text())
     assert best["mean_feasible"] is True and best["n_seeds"] >= 2

@@ -26,6 +26,10 @@ LEGACY_SEARCH = {"langevin_steps": ("int", 10, 100), "langevin_step_size": ("log
                  "temperature": ("log", 1e-4, 1e-2), "beta": ("uniform", 0.0, 20.0)}
 
 
+#: Issue 23 added one arm to the ablation: LAC unconstrained (ν pinned at 0).
+UNCONSTRAINED = {"nu_lr": 0.0, "nu_init": 0.0}
+
+
 def legacy_grid(space, task, seeds, budget):
     from lac_rllib.tasks import get_task
 
@@ -37,8 +41,10 @@ def legacy_grid(space, task, seeds, budget):
         return [("paper", "", None, t, s, {}) for t in ((task,) if task else LEGACY_PAPER_TASKS) for s in range(seeds)]
     tiny = budget == "quick" and get_task(task).preset == "tiny"
     groups = (LEGACY_QUICK_ABLATION if tiny else LEGACY_ABLATION) if space == "ablation" else LEGACY_SMOKE
-    return [(g, p, v, task, s, {**fixed, p: v}) for g, (p, values, fixed) in groups.items() for v in values
-            for s in range(seeds)]
+    trials = [(g, p, v, task, s, {**fixed, p: v}) for g, (p, values, fixed) in groups.items() for v in values
+              for s in range(seeds)]
+    reference = [("unconstrained", "", None, task, s, UNCONSTRAINED) for s in range(seeds)]
+    return trials + (reference if space == "ablation" else [])
 
 
 def _plan(tmp_path, monkeypatch, *argv):

@@ -1,0 +1,148 @@
+"""A sweep's results read back from MLflow (the record of every trial, resumed ones included), and
+its close: the report on the parent run (summary, frontier, importances, safety, chain health,
+a multi-objective search's Pareto set, a confirmation's verdict) and the note that leads it.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+from lac_rllib.constrained.metrics import (
+    ACTOR_STD_MEAN,
+    COST_LIMIT,
+    EPISODE_COST,
+    EPISODE_RETURN,
+    FEASIBLE,
+    LANGEVIN_AT_BOUND,
+    LANGEVIN_CLIP_FRACTION,
+)
+from sweeps.tracking import (
+    CONFIG_ID_TAG,
+    CONFIG_TAG,
+    DEFAULT_TAG,
+    P_ALGO,
+    P_GROUP,
+    P_SEED,
+    P_SWEPT_PARAM,
+    P_SWEPT_VALUE,
+    P_TASK,
+    STATUS_TAG,
+    STOPPED_TAG,
+    SweepTracker,
+    learning_curve,
+)
+from sweeps.trainable import OBJECTIVE
+
+#: Where Optuna 5's ``trial.set_constraint`` keeps the constraint the sweep hands it (sweeps/sweep.py).
+OPTUNA_CONSTRAINT_KEY = "constraints:episode_cost_minus_limit"
+#: The final-iteration metrics the chain-health flags read (sweeps/chain_health.py).
+CHAIN_FINAL = (LANGEVIN_AT_BOUND, LANGEVIN_CLIP_FRACTION, ACTOR_STD_MEAN)
+
+
+def param_value(text: str):
+    """A logged param as its value: JSON for numbers and None, the text itself for a string
+    (sweeps.tracking logs strings as they are, e.g. a swept ``algo``)."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = ()) -> tuple[pd.DataFrame, dict]:
+    """(trials, curves): one row per child run (its configuration, seed, status, final metrics and
+    the values of ``fields``), and each trial's learning curve by trial id."""
+    rows, curves = [], {}
+    for run in tracker.children(parent):
+        p, m, tid = run.data.params, run.data.metrics, run.data.tags.get("lac.trial_id", run.info.run_id)
+        rows.append({"trial_id": tid, "group": p.get(P_GROUP, ""), "param": p.get(P_SWEPT_PARAM, ""),
+                     "value": param_value(p.get(P_SWEPT_VALUE, "null")), "task": p.get(P_TASK),
+                     "seed": int(p.get(P_SEED, 0)), "algo": p.get(P_ALGO, "lac"),
+                     "config": run.data.tags.get(CONFIG_TAG, ""), "config_id": run.data.tags.get(CONFIG_ID_TAG, ""),
+                     "default": run.data.tags.get(DEFAULT_TAG) == "1",
+                     "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
+                     if run.info.status == "FINISHED" else "ERROR",
+                     **{k: m.get(k, float("nan")) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE,
+                                                            OBJECTIVE, *CHAIN_FINAL)},
+                     **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
+                                                       *fields) if k in p}})
+        curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
+    return pd.DataFrame(rows), curves
+
+
+def varied(trials: pd.DataFrame, fields: tuple[str, ...]) -> list[str]:
+    """The fields among ``fields`` whose value differs between the sweep's trials."""
+    return [f for f in fields if f in trials and trials[f].astype(str).nunique() > 1]
+
+
+def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str, plan=None) -> None:
+    """The report on the parent run (``summary/``) and the note that leads it; the parent closed."""
+    from sweeps.report import algorithm_comparison, note_markdown, summarize, write_sweep_reports
+
+    fields = swept_fields(plan) if plan is not None else ()
+    trials, curves = sweep_results(tracker, parent, fields)
+    note = heading
+    with tempfile.TemporaryDirectory() as tmp:
+        if len(trials):
+            write_sweep_reports(trials, curves, tmp, fields=tuple(varied(trials, fields)))
+            pareto = pareto_set(plan) if plan is not None and plan.sweep.multi_objective else None
+            if pareto is not None:
+                (Path(tmp) / "pareto.json").write_text(json.dumps(pareto, indent=2, default=str))
+        tracker.client.log_artifacts(parent, tmp, "summary")
+        if len(trials):
+            summary = summarize(trials)
+            footer = ("Files: `summary/summary.md` (every column), `summary/frontier.html` (the reward-cost "
+                      "frontier, interactive), `summary/importance.png`, `summary/aggregates.png`, "
+                      "`summary/learning_curves.png`; one child run per trial (group them by the tag `lac.config` "
+                      "in the runs table to see one averaged curve per configuration).")
+            note = note_markdown(summary, heading, footer, extra=note_extras(summary, trials, curves, fields, plan,
+                                                                               pareto))
+            comparison = algorithm_comparison(summary)
+            if comparison:  # the algorithms side by side lead the note (MLflow cuts a tag at 8000 characters)
+                note = note.replace(heading, heading + "\n\n" + comparison, 1)[:7990]
+    tracker.set_note(parent, note)
+    tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
+    tracker.client.set_tag(parent, STATUS_TAG, "finished")
+    tracker.client.set_terminated(parent, status="FINISHED")
+
+
+def swept_fields(plan) -> tuple[str, ...]:
+    """The fields a sweep varies (sweeps/confirm.py ``varied_fields``) and ``algo``."""
+    from sweeps.confirm import varied_fields
+
+    return tuple(dict.fromkeys([*varied_fields(plan.sweep), "algo"]))
+
+
+def note_extras(summary, trials, curves, fields, plan, pareto) -> str:
+    """What the note adds below its head: a confirmation's verdict, the Pareto set, the top three
+    fields for return and cost, the safety statistics and chain-health flags."""
+    from sweeps import report
+
+    parts = []
+    if plan is not None and plan.confirms:
+        from sweeps.confirm import confirmation_markdown
+
+        parts.append(confirmation_markdown(list(plan.confirms), summary))
+    if pareto:
+        parts.append(report.pareto_markdown(pareto))
+    parts.append(report.importance_markdown(trials, tuple(varied(trials, fields))))
+    parts.append(report.safety_markdown(summary, trials, curves))
+    return "\n".join(p for p in parts if p)
+
+
+def pareto_set(plan) -> list[dict] | None:
+    """A multi-objective search's Pareto set from its Optuna study: the feasible non-dominated
+    configurations on (return, cost), each with its sampled values."""
+    import optuna
+
+    try:
+        study = optuna.load_study(study_name=plan.name, storage=plan.optuna_storage)
+    except KeyError:
+        return None
+    return [{"number": t.number, "params": {k.split("/")[-1]: v for k, v in t.params.items()},
+             EPISODE_RETURN: t.values[0], EPISODE_COST: t.values[1],
+             "constraint": t.system_attrs.get(OPTUNA_CONSTRAINT_KEY)} for t in study.best_trials]
+

@@ -1,0 +1,116 @@
+"""Safety statistics per configuration: how often its seeds end within the limit, and how much
+cost above the limit its runs paid on the way there.
+
+- ``p_feasible``: the fraction of its finished seeds whose final episode cost is within the limit
+  (final episode_cost <= cost_limit), with the Wilson score interval. Why Wilson: with the 3-10
+  seeds of a sweep the normal ("Wald") interval collapses to a point at 0/n and n/n and leaves
+  [0, 1] otherwise; Wilson's keeps its coverage near the nominal 95% down to a few trials
+  (Brown, Cai & DasGupta 2001) and has a closed form.
+- ``violation``: over a run's logged iterations, the cost it spent above the limit, sum of
+  max(0, episode_cost − cost_limit), a measure of how unsafe the *training* was, which the final
+  cost does not show (docs/spec.md reports the final cost only). It depends on how many iterations
+  a run logs, so ``violation_mean`` (per iteration) is given too; the worst iteration is where the
+  excess over the limit peaked.
+
+Seeds are counted as sweeps.report counts them: failed trials (status ERROR, or a NaN final return
+or cost) and trials a scheduler stopped early (STOPPED) are left out, so ``n_seeds`` here equals
+the summary's.
+"""
+
+from __future__ import annotations
+
+import math
+from statistics import NormalDist
+
+import numpy as np
+import pandas as pd
+
+from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST
+from sweeps.report import KEYS, _prepared, _value_key
+
+CONFIDENCE = 0.95
+SAFETY_COLUMNS = ["n_seeds", "n_feasible", "p_feasible", "p_feasible_low", "p_feasible_high", "violation_total",
+                  "violation_mean", "worst_excess", "worst_env_steps", "worst_trial_id", "final_cost_std",
+                  "final_cost_min", "final_cost_max"]
+VIOLATION_KEYS = ("violation_total", "violation_mean", "violating_iterations", "n_iterations", "worst_excess",
+                  "worst_env_steps")
+
+
+def wilson_interval(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float, float]:
+    """(k/n, low, high): the Wilson score interval of a binomial proportion (two-sided), in closed
+    form; all NaN when n = 0. The ends are exactly 0 at k = 0 and 1 at k = n."""
+    if n <= 0:
+        return math.nan, math.nan, math.nan
+    if not 0 <= k <= n:
+        raise ValueError(f"k={k!r} must be in [0, n={n!r}]")
+    p = k / n
+    z = NormalDist().inv_cdf(0.5 + 0.5 * confidence)
+    denom = 2 * (n + z * z)
+    center = (2 * n * p + z * z) / denom
+    delta = z / denom * math.sqrt(4 * n * p * (1 - p) + z * z)
+    return p, (0.0 if k == 0 else center - delta), (1.0 if k == n else center + delta)
+
+
+def violation(curve: pd.DataFrame) -> dict:
+    """Cost above the limit over a run's curve (env_steps, episode_cost, cost_limit), iterations
+    with a NaN cost or limit left out; keys ``VIOLATION_KEYS``:
+
+    violation_total = Σ max(0, episode_cost − cost_limit); violation_mean = that / n_iterations;
+    violating_iterations = how many iterations were over the limit; worst_excess = the largest
+    episode_cost − cost_limit (≤ 0 when the run never left the limit) and worst_env_steps where it
+    happened (the first such iteration). All NaN when no iteration is usable."""
+    empty = {k: math.nan for k in VIOLATION_KEYS} | {"n_iterations": 0, "violating_iterations": 0}
+    if curve is None or not isinstance(curve, pd.DataFrame) or EPISODE_COST not in curve or COST_LIMIT not in curve:
+        return empty
+    cost = pd.to_numeric(curve[EPISODE_COST], errors="coerce").to_numpy(float)
+    limit = pd.to_numeric(curve[COST_LIMIT], errors="coerce").to_numpy(float)
+    steps = (pd.to_numeric(curve[ENV_STEPS], errors="coerce").to_numpy(float) if ENV_STEPS in curve
+             else np.full(len(curve), np.nan))
+    ok = np.isfinite(cost) & np.isfinite(limit)
+    if not ok.any():
+        return empty
+    excess, steps = (cost - limit)[ok], steps[ok]
+    total = float(np.clip(excess, 0, None).sum())
+    worst = int(np.argmax(excess))
+    return {"violation_total": total, "violation_mean": total / excess.size,
+            "violating_iterations": int((excess > 0).sum()), "n_iterations": int(excess.size),
+            "worst_excess": float(excess[worst]), "worst_env_steps": float(steps[worst])}
+
+
+def _with_limit(curve, limit: float):
+    """The curve with its cost_limit filled from the trial's where the curve has none."""
+    if not isinstance(curve, pd.DataFrame):
+        return curve
+    c = curve.copy()
+    c[COST_LIMIT] = pd.to_numeric(c[COST_LIMIT], errors="coerce").fillna(limit) if COST_LIMIT in c else limit
+    return c
+
+
+def safety_table(trials: pd.DataFrame, curves: dict) -> pd.DataFrame:
+    """One row per configuration (``KEYS``, in sweeps.report.summarize's order) with
+    ``SAFETY_COLUMNS``: n_seeds, n_feasible, p_feasible [p_feasible_low, p_feasible_high] (Wilson),
+    the mean over its seeds of violation_total and violation_mean (seeds without a curve left out),
+    the worst iteration over its seeds (worst_excess, worst_env_steps, worst_trial_id) and the
+    spread of the final cost (final_cost_std with ddof=1, final_cost_min, final_cost_max)."""
+    df, failed = _prepared(trials)
+    scored = ~failed & ~df["status"].astype(str).eq("STOPPED")
+    rows = []
+    for key, g in df.groupby(KEYS, dropna=False, sort=False):
+        ok = g[scored.loc[g.index]]
+        final = pd.to_numeric(ok[EPISODE_COST], errors="coerce")
+        limit = pd.to_numeric(ok[COST_LIMIT], errors="coerce")
+        k = int((final <= limit).sum())  # a NaN limit counts as not feasible
+        p, lo, hi = wilson_interval(k, len(ok))
+        runs = [(tid, violation(_with_limit(curves.get(tid), lim)))
+                for tid, lim in zip(ok["trial_id"], limit) if tid in curves]
+        runs = [(tid, v) for tid, v in runs if v["n_iterations"]]
+        worst = max(runs, key=lambda tv: tv[1]["worst_excess"], default=(None, {}))
+        rows.append(dict(
+            zip(KEYS, key), n_seeds=len(ok), n_feasible=k, p_feasible=p, p_feasible_low=lo, p_feasible_high=hi,
+            violation_total=float(np.mean([v["violation_total"] for _, v in runs])) if runs else math.nan,
+            violation_mean=float(np.mean([v["violation_mean"] for _, v in runs])) if runs else math.nan,
+            worst_excess=worst[1].get("worst_excess", math.nan),
+            worst_env_steps=worst[1].get("worst_env_steps", math.nan), worst_trial_id=worst[0],
+            final_cost_std=final.std(ddof=1), final_cost_min=final.min(), final_cost_max=final.max()))
+    rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"]))
+    return pd.DataFrame(rows, columns=KEYS + SAFETY_COLUMNS)
