@@ -76,9 +76,12 @@ def algorithm(row: dict) -> str:
 
 
 def label(row: dict) -> str:
-    """Short text of a configuration: ``param=value``, else its ``config`` label, cut to LABEL_CHARS."""
+    """Short text of a configuration: ``group param=value`` (two groups may sweep the same field: the
+    ablation's NI and VT), else its group, else its ``config`` label, cut to LABEL_CHARS."""
     param = "" if _is_na(row.get("param")) else str(row.get("param", ""))
-    text = f"{param}={_fmt_value(row.get('value'))}" if param else str(row.get("config") or row.get("group") or "–")
+    group = "" if _is_na(row.get("group")) else str(row.get("group", ""))
+    text = (f"{group} {param}={_fmt_value(row.get('value'))}".strip() if param else
+            group if group and group not in ("search", "paper") else str(row.get("config") or group or "–"))
     return text if len(text) <= LABEL_CHARS else text[:LABEL_CHARS - 1] + "…"
 
 
@@ -160,6 +163,7 @@ def frontier_png(summary: pd.DataFrame, path) -> str | None:
         if not math.isnan(limit):
             ax.axvline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
         show = np.ones(len(g), bool) if len(g) <= LABEL_ALL_UP_TO else (on | default | (g["algo_"] != LAC).to_numpy())
+        ax.margins(x=0.25, y=0.08)  # room for the labels of the right-most points
         for x, y, text in zip(cost[show], ret[show], g["label_"].to_numpy()[show]):
             ax.annotate(text, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=7)
         ax.set(title=f"{task}: final return vs cost (mean, 95% CI)" if task else "final return vs cost (mean, 95% CI)",

@@ -450,14 +450,15 @@ def safety_markdown(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -
     s = with_safety(summary, trials, curves)
     lines = ["**Safety per configuration** (P(feasible at the end) with a Wilson 95% interval; violation = "
              "Σ over iterations of max(0, cost − limit), mean over seeds; the worst iteration over its seeds):", "",
-             "| configuration | P(feasible) [95%] | violation | worst iteration (excess @ env steps) "
+             "| group, configuration | P(feasible) [95%] | violation | worst iteration (excess @ env steps) "
              "| final cost min–max | frontier | chain |", "|---|---:|---:|---:|---:|---|---|"]
     for r in s.to_dict("records"):
         p = "–" if _is_na(r.get("p_feasible")) else (f"{r['p_feasible']:.2f} [{r['p_feasible_low']:.2f}, "
                                                     f"{r['p_feasible_high']:.2f}]")
         worst = "–" if _is_na(r.get("worst_excess")) else f"{r['worst_excess']:+.2f} @ {r['worst_env_steps']:,.0f}"
         spread = "–" if _is_na(r.get("final_cost_min")) else f"{r['final_cost_min']:.2f}–{r['final_cost_max']:.2f}"
-        cells = [_what(r) if r["param"] else f"{r['group']}", p, _fmt_num(r.get("violation_total")), worst, spread,
+        what = f"{r['group']} {_what(r)}" if r["param"] else r["group"] + (" (default)" if r.get("is_default") else "")
+        cells = [what, p, _fmt_num(r.get("violation_total")), worst, spread,
                  "yes" if r.get("on_frontier") else "", r.get("chain_flags") or ""]
         lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines) + "\n"

@@ -130,7 +130,7 @@ def note_extras(summary, trials, curves, fields, plan, pareto) -> str:
         parts.append(report.pareto_markdown(pareto))
     parts.append(report.importance_markdown(trials, tuple(varied(trials, fields))))
     parts.append(report.safety_markdown(summary, trials, curves))
-    return "\n".join(p for p in parts if p)
+    return "\n\n".join(p.strip() for p in parts if p)
 
 
 def pareto_set(plan) -> list[dict] | None:
