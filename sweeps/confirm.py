@@ -16,8 +16,8 @@ import math
 
 import pandas as pd
 
-#: A confirmation group's name: top1 … topK, beside "default".
-TOP, DEFAULT_GROUP = "top", "default"
+#: A confirmation group's name: top1 … topK, beside "default" and "baseline-ALGO".
+TOP, DEFAULT_GROUP, BASELINE = "top", "default", "baseline-"
 
 
 def varied_fields(sweep) -> list[str]:
@@ -48,12 +48,14 @@ def winners(summary: pd.DataFrame, fields_of: dict[str, dict], k: int) -> list[d
     return out
 
 
-def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str):
-    """The confirmation sweep: one group per winner (its fields as the group's ``set``) and the
-    default, on ``seeds`` seeds after the sweep's largest, at ``budget``."""
+def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str, baselines: tuple[str, ...] = ()):
+    """The confirmation sweep: one group per winner (its fields as the group's ``set``), the
+    default and the ``baselines`` the sweep ran (each algorithm's own defaults, group
+    ``baseline-ALGO``), on ``seeds`` seeds after the sweep's largest, at ``budget``."""
     from sweeps.sweep_file import SweepFile
 
     groups = {w["group"]: {"set": w["fields"]} for w in top} | {DEFAULT_GROUP: {}}
+    groups |= {f"{BASELINE}{algo}": {"set": {"algo": algo}} for algo in baselines}
     data = sweep.model_dump(exclude_none=True, exclude={"search", "grid", "groups", "groups_at", "searcher",
                                                           "num_samples", "name", "seeds", "budget"})
     return SweepFile.model_validate({**data, "groups": groups, "budget": budget, "name": name,

@@ -510,7 +510,9 @@ def run_confirmation(plan: Plan, sweep_dir: Path, commit: str) -> int:
         print("confirmation: no feasible configuration other than the default to confirm", flush=True)
         return 0
     name = f"{plan.name}-confirm"
-    cfile = confirm.confirmation_file(plan.sweep, top, seeds, budget, name)
+    # The baselines the sweep ran (besides its own algorithm) rerun at their defaults beside the winners.
+    baselines = tuple(a for a in dict.fromkeys(trials["algo"]) if a not in plan.sweep.algo and a != "lac")
+    cfile = confirm.confirmation_file(plan.sweep, top, seeds, budget, name, baselines)
     cdir = Path(plan.storage) / name
     infra = dataclasses.replace(plan.infra, resume=(cdir / SWEEP_FILE).exists())
     cplan = dataclasses.replace(plan_sweep(cfile, "confirm", infra), confirms=tuple(top))

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from mlflow.tracking import MlflowClient
 
-from sweeps import confirm
+from sweeps import confirm, sweep_file
 from sweeps import run as cli
 
 
@@ -71,3 +71,15 @@ def test_a_smoke_search_then_its_confirmation_on_fresh_seeds(ray_session, tmp_pa
     assert "**Confirmation on fresh seeds**" in note and "| top1 |" in note and ("| yes |" in note or "| no |" in note)
     assert search.data.tags["lac.confirmed_by"] == "s-PointHazard-v0-smoke-confirm"
     assert (Path(tmp_path / "rr" / "s-PointHazard-v0-smoke-confirm" / "sweep.yaml")).exists()
+
+
+def test_the_confirmation_reruns_the_winners_the_default_and_the_baselines_on_fresh_seeds():
+    sweep = sweep_file.load("x.yaml", "task: lac/PointHazard-v0\nseeds: {count: 2, start: 5}\nbudget: smoke\n"
+                                      "groups:\n  compare: {grid: {algo: [lac, ppo_lag]}}\n"
+                                      "  T: {grid: {langevin_steps: [5, 9]}}\n")
+    top = [{"group": "top1", "config": "T-langevin_steps=9", "fields": {"langevin_steps": 9}, "search": {}}]
+    c = confirm.confirmation_file(sweep, top, 3, "quick", "x-confirm", baselines=("ppo_lag",))
+    assert c.seed_list() == (7, 8, 9) and c.budget == "quick" and c.name == "x-confirm"
+    assert {g: dict(grp.set) for g, grp in c.groups.items()} == {
+        "top1": {"langevin_steps": 9}, "default": {}, "baseline-ppo_lag": {"algo": "ppo_lag"}}
+    assert confirm.varied_fields(sweep) == ["algo", "langevin_steps"]
