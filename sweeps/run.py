@@ -174,13 +174,14 @@ def make_plan(args) -> Plan:
     check_reachable(infra.tracking_uri)
     # A user's env module is looked up on the Python path, then beside the sweep file, then here.
     search_dirs = ((str(Path(args.config).resolve().parent),) if args.config else ()) + (os.getcwd(),)
-    plan = plan_sweep(sweep, space, infra, search_dirs)
+    plan = plan_sweep(sweep, space, infra, search_dirs, source=args.config or f"--space {args.space}")
     if args.confirm_top:
         plan = dataclasses.replace(plan, confirm=check_confirm(plan, args))
     return plan
 
 
-def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = ()) -> Plan:
+def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = (),
+               source: str = "the sweep") -> Plan:
     """A resolved sweep's plan: its tasks (a user's env built and stepped once), its trials with
     their fields resolved, the estimate, its name and storage."""
     cpus = sweep.cpus_per_trial
@@ -188,7 +189,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         # Tune would keep such a trial PENDING forever on the local Ray this command starts.
         raise ValueError(f"--cpus-per-trial {cpus} is more than this machine's {os.cpu_count()} CPUs; "
                          f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
-    tasks, user_tasks = resolve_tasks(sweep, search_dirs)
+    tasks, user_tasks = resolve_tasks(sweep, search_dirs, source)
     sets = trial_sets(sweep)
     trials = None
     if not sweep.is_search:
@@ -327,7 +328,8 @@ def trial_sets(sweep: SweepFile) -> dict:
     return sets
 
 
-def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> tuple[list[str], dict]:
+def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), source: str = "the sweep"
+                  ) -> tuple[list[str], dict]:
     """The sweep's task ids, every one known here; a user's env is built once and stepped first
     (lac_rllib/tasks/user.py), its definition returned to travel with the trials."""
     from lac_rllib.tasks import get_task
@@ -344,7 +346,7 @@ def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> tuple[
                              episode_cost_discount=task.episode_cost_discount, cost_key=task.cost_key,
                              preset=task.preset, kwargs=task.kwargs, search_dirs=search_dirs)
         except ValueError as e:
-            raise ValueError(f"task[{i}]: {e}") from None
+            raise ValueError(f"{source}: task[{i}]: {e}") from None
         ids.append(spec.id)
         user[spec.id] = definition(spec)
     return ids, user

@@ -145,6 +145,14 @@ class Distribution(BaseModel):
     quniform: tuple[float, float, float] | None = None
     """[low, high, q]: uniform, rounded to a multiple of q (quantised)."""
 
+    @field_validator("choice", mode="before")
+    @classmethod
+    def _scalars(cls, v):
+        if isinstance(v, (list, tuple)) and any(isinstance(c, (list, tuple, dict)) for c in v):
+            raise ValueError(f"{list(v)}: choice values are numbers, strings, booleans or null (Optuna's "
+                             "categorical); accepted for lists such as layer sizes: a grid")
+        return v
+
     @model_validator(mode="after")
     def _exactly_one(self):
         given = [k for k in type(self).model_fields if getattr(self, k) is not None]

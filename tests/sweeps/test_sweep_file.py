@@ -134,6 +134,8 @@ BAD = [
     ("grid: {nu_lr: [0.1]\n", r"my.yaml:2: not valid YAML"),
     ("task: {factory: 'x'}\n", r"task\[0\]"),
     ("- a\n- b\n", r"a sweep file is a mapping of keys"),
+    ("search: {actor_hidden: {choice: [[64, 64]]}}\n",
+     r"my.yaml:1: search.actor_hidden.choice: \[\[64, 64\]\]: choice values are numbers, strings, booleans or null"),
 ]
 
 
@@ -185,8 +187,8 @@ USER_ENV = "task: {factory: 'user_envs:%s', cost_limit: 5, cost_key: violation, 
 
 
 @pytest.mark.parametrize("factory,needle", [
-    ("make_costless", r"task\[0\]: task user_envs:make_costless: its step info has no 'violation' \(keys: none\); "
-                      r"accepted: an env that reports the step's cost"),
+    ("make_costless", r"my.yaml: task\[0\]: task user_envs:make_costless: its step info has no 'violation' "
+                      r"\(keys: none\); accepted: an env that reports the step's cost"),
     ("make_dict_obs",
      r"task\[0\]: task user_envs:make_dict_obs: its observation space is Dict\(.*accepted: a flat Box"),
     ("no_such_function", r"task\[0\]: task user_envs:no_such_function: cannot be built \(AttributeError"),
