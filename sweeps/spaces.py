@@ -194,7 +194,8 @@ def trial_spec(config: dict) -> TrialSpec:
 
 def groups_for(sweep, preset: str) -> dict:
     """The sweep file's groups for a task of ``preset`` at the sweep's budget: the first matching
-    ``groups_at``, else ``groups``, else its ``grid`` as one group, else one configuration."""
+    ``groups_at``, else ``groups``, else its ``grid`` as one group, else one configuration (a
+    resolved sweep always has ``groups``: sweeps/run.py names a file's one group after the file)."""
     from sweeps.sweep_file import Group
 
     for at in sweep.groups_at:
@@ -202,12 +203,7 @@ def groups_for(sweep, preset: str) -> dict:
             return at.groups
     if sweep.groups is not None:
         return sweep.groups
-    return {sweep_group_name(sweep): Group(grid=sweep.grid or {})}
-
-
-def sweep_group_name(sweep) -> str:
-    """A file's one group is named after the sweep (the built-in ``paper`` and ``smoke``)."""
-    return sweep.name or "sweep"
+    return {sweep.name or "sweep": Group(grid=sweep.grid or {})}
 
 
 def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
