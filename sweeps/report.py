@@ -447,7 +447,7 @@ def with_safety(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> pd
 def safety_markdown(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> str:
     """Per configuration: P(feasible at the end) [Wilson 95%], the violation during training and the
     worst iteration, the final cost's spread, and chain-health flags where there are any."""
-    s = with_safety(summary, trials, curves)
+    s = summary if "p_feasible" in summary else with_safety(summary, trials, curves)  # once per report
     lines = ["**Safety per configuration** (P(feasible at the end) with a Wilson 95% interval; violation = "
              "Σ over iterations of max(0, cost − limit), mean over seeds; the worst iteration over its seeds):", "",
              "| group, configuration | P(feasible) [95%] | violation | worst iteration (excess @ env steps) "
@@ -499,7 +499,7 @@ def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir, fields: tup
     summary = with_safety(summarize(trials), trials, curves)
     best = best_configuration(summary)
     summary.to_csv(out / "summary.csv", index=False)
-    (out / "summary.md").write_text(markdown_table(summary) + "\n" + safety_markdown(summarize(trials), trials, curves)
+    (out / "summary.md").write_text(markdown_table(summary) + "\n" + safety_markdown(summary, trials, curves)
                                     + ("\n" + importance_markdown(trials, fields) if fields else ""), encoding="utf-8")
     (out / "best.json").write_text(json.dumps(best if best else {"best": None}, indent=2) + "\n")
     trials.to_csv(out / "trials.csv", index=False)

@@ -103,7 +103,7 @@ def test_a_user_file_sweeps_any_field_of_several_algorithms_from_chosen_seeds(tm
 def test_seed_start_trains_the_seeds_asked_for(tmp_path, monkeypatch):
     plan = _plan(tmp_path, monkeypatch, "--space", "smoke", "--seed-start", "100", "--seeds", "3")
     assert sorted({t.seed for t in plan.trials}) == [100, 101, 102]
-    assert "seeds 100..102" in plan.sweep.dump() or plan.sweep.seed_list() == (100, 101, 102)
+    assert plan.sweep.seed_list() == (100, 101, 102)
 
 
 def test_the_resolved_sweep_is_a_file_that_reruns_it(tmp_path, monkeypatch):
