@@ -125,7 +125,10 @@ def lower_priority(proc, nice: int) -> None:
         pass
 
 
-def load_curves(out: Path):
+def load_curves(out: Path, include: list[Path] = ()):
+    """Every iteration of the runs under ``out/runs``, then the rows of each ``include``d curves.csv
+    (an earlier report's, e.g. of runs whose directories a later session no longer has) for the
+    (variant, seed) pairs not on disk: a run on disk wins over its committed curve."""
     import pandas as pd
 
     rows = []
@@ -136,7 +139,16 @@ def load_curves(out: Path):
                 r = json.loads(line)
                 rows.append({"variant": variant, "seed": seed, "iteration": r["iteration"],
                              **{k: r.get(k, math.nan) for k in CURVE_KEYS}})
-    return pd.DataFrame(rows)
+    df = pd.DataFrame(rows, columns=["variant", "seed", "iteration", *CURVE_KEYS])
+    for csv in include:
+        earlier = pd.read_csv(csv)
+        missing = set(earlier.columns) ^ set(df.columns)
+        if missing:
+            raise ValueError(f"{csv}: not a curves.csv of this benchmark (columns {sorted(missing)} differ)")
+        on_disk = set(zip(df["variant"], df["seed"]))
+        keep = [(v, s) not in on_disk for v, s in zip(earlier["variant"], earlier["seed"])]
+        df = pd.concat([df, earlier[keep]], ignore_index=True) if any(keep) else df
+    return df
 
 
 def _fmt(mean: float, std: float | None) -> str:
@@ -217,8 +229,9 @@ def plot(df, task: str, order: list[str], path: Path) -> None:
     plt.close(fig)
 
 
-def report(out: Path, task: str, order: list[str], timesteps: int | None, compare_at: int | None = None) -> str | None:
-    df = load_curves(out)
+def report(out: Path, task: str, order: list[str], timesteps: int | None, compare_at: int | None = None,
+           include: list[Path] = ()) -> str | None:
+    df = load_curves(out, include)
     if df.empty:
         return None
     order = [*order, *sorted(set(df["variant"]) - set(order))]  # runs of other invocations too
@@ -229,6 +242,11 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
     reached = df.groupby(["variant", "seed"]).agg(steps=("env_steps", "max"), hours=("time_s", "max"))
     budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
                        for (v, s), r in reached.iterrows())
+    disk = {(p.parent.parent.name, int(p.parent.name[4:])) for p in out.glob("runs/*/seed*/progress.jsonl")}
+    earlier = sorted({(v, int(s_)) for v, s_ in zip(df["variant"], df["seed"])} - disk)
+    if earlier:
+        budget += ("\n\nFrom earlier reports' curves (" + ", ".join(str(p) for p in include) + "), their run "
+                   "directories gone: " + ", ".join(f"{v} seed {s_}" for v, s_ in earlier) + ".")
     text = (f"# {task}: learning curves\n\n"
             f"Budget per run: {f'{timesteps:,} env steps' if timesteps else 'see the commands'}; reached:\n{budget}\n\n"
             f"{table}\n\n![curves](curves.png)\n\nCommands:\n\n```\n" + "\n".join(commands) + "\n```\n")
@@ -255,6 +273,9 @@ def main(argv=None) -> int:
     parser.add_argument("--compare-at", type=int, default=None, metavar="STEPS",
                         help="score runs at this many env steps (default: the fewest any run reached); "
                              "runs short of it are listed, not scored")
+    parser.add_argument("--include-curves", action="append", default=[], metavar="CSV", type=Path,
+                        help="an earlier report's curves.csv: its runs that are not on disk join the report "
+                             "(a later session's machine no longer has their directories)")
     parser.add_argument("--resume", action="store_true",
                         help="continue runs from their latest checkpoint (lac-train --resume); "
                              "runs at the budget are skipped")
@@ -275,7 +296,7 @@ def main(argv=None) -> int:
     order = [v for v, _ in variants]
     out.mkdir(parents=True, exist_ok=True)
     if args.report_only:
-        print(report(out, args.task, order, None, args.compare_at) or "no runs on disk")
+        print(report(out, args.task, order, None, args.compare_at, args.include_curves) or "no runs on disk")
         return 0
     queue = [(v, pairs, s) for s in seeds for v, pairs in variants]  # seed-major: every variant gets seed 0 first
     if args.resume:
@@ -302,12 +323,12 @@ def main(argv=None) -> int:
                 running.remove(item)
                 print(f"finished {item[0]} seed {item[1]} (exit {item[2].returncode})", flush=True)
             if time.time() - last > args.report_every:
-                report(out, args.task, order, args.timesteps)
+                report(out, args.task, order, args.timesteps, include=args.include_curves)
                 last = time.time()
     except KeyboardInterrupt:
         for item in running:
             os.killpg(item[2].pid, 15)
-    print(report(out, args.task, order, args.timesteps) or "no runs produced a curve")
+    print(report(out, args.task, order, args.timesteps, include=args.include_curves) or "no runs produced a curve")
     return 0
 
 
