@@ -26,6 +26,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.algorithms.lac.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
 from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.gradients import zero_non_finite_
 from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
 from lac_rllib.constrained.metrics import (
     ACTOR_KL,
@@ -186,6 +187,7 @@ class LACTorchLearner(TorchLearner):
         ``actor_update_start_iteration`` on [C]; then Polyak of every target,
         θ' ← τ·θ + (1 − τ)·θ' (Algorithm 2, lines 11-13)."""
         grads = dict(gradients_dict)
+        zero_non_finite_(grads)  # RLlib's NaN/inf guard, one test for all (constrained/gradients.py)
         frozen_actors = []
         for mid in self.module.keys():
             config = self.config.get_config_for_module(mid)

@@ -38,6 +38,7 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
+from lac_rllib.constrained.gradients import zero_non_finite_
 from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier
 from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, declared with every other)
     COST_VF_LOSS,
@@ -198,6 +199,7 @@ class PPOLagTorchLearner(PPOTorchLearner):
                     del grads[pid]
                 # Adam skips a parameter whose .grad is None: no step and no moment update.
                 optim.zero_grad(set_to_none=True)
+        zero_non_finite_(grads)  # RLlib's NaN/inf guard, one test for all (constrained/gradients.py)
         super().apply_gradients(grads)
 
     @override(PPOTorchLearner)

@@ -32,6 +32,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.gradients import zero_non_finite_
 from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier
 from lac_rllib.constrained.metrics import (
     ACTOR_LOSS,
@@ -175,6 +176,7 @@ class SACLagTorchLearner(TorchLearner):
         None (the actor off its step) is skipped by Adam, moments and step count included. Then, on
         a policy-delay step, Polyak θ' ← τ·θ + (1 − τ)·θ' of both target critics [O]; then λ's step."""
         actor_step = self.is_actor_step()
+        zero_non_finite_(gradients_dict)  # RLlib's NaN/inf guard, one test for all (constrained/gradients.py)
         super().apply_gradients(gradients_dict)
         for mid, module in self.module.items():
             config = self.config.get_config_for_module(mid)

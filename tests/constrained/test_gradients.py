@@ -1,0 +1,61 @@
+"""constrained/gradients.py: RLlib's NaN/inf gradient guard in one test per step, the same update."""
+
+import logging
+
+import torch
+from ray.rllib.core import DEFAULT_MODULE_ID
+
+from lac_rllib.algorithms.sac_lag.config import build_config
+from lac_rllib.constrained.gradients import zero_non_finite_
+from lac_rllib.tasks import get_task
+
+
+def test_finite_gradients_are_left_as_they_are():
+    grads = {"a": torch.randn(3, 4), "b": torch.randn(5), "none": None}
+    before = dict(grads)
+    assert zero_non_finite_(grads) == []
+    assert all(grads[k] is before[k] for k in grads)
+
+
+def test_a_finite_gradient_whose_norm_overflows_is_left_as_it_is():
+    big = torch.full((1000,), 3e37)  # finite, but its L2 norm overflows float32
+    assert not torch.isfinite(torch.linalg.vector_norm(big))
+    grads = {"big": big, "small": torch.ones(2)}
+    assert zero_non_finite_(grads) == [] and grads["big"] is big
+
+
+def test_non_finite_gradients_become_what_torch_learner_makes_of_them(caplog):
+    bad = torch.tensor([1.0, float("nan"), float("inf"), -float("inf")])
+    good = torch.randn(3)
+    grads = {"bad": bad, "good": good}
+    with caplog.at_level(logging.WARNING):
+        assert zero_non_finite_(grads) == ["bad"]
+    torch.testing.assert_close(grads["bad"], torch.nan_to_num(bad))
+    assert grads["good"] is good
+    assert "bad" in caplog.text
+
+
+
+def test_the_step_equals_rllibs_own_guard_with_one_nan_gradient(one_torch_thread):
+    """Our default (RLlib's per-tensor tests off, ours on) against RLlib's guard: the same weights
+    after a step where one tensor's gradient is NaN and the others are finite."""
+    def learner(rllib_guard: bool):
+        config = build_config("lac/PointHazard-v0", 0, {"actor_hidden": (16, 16), "critic_hidden": (16, 16)})
+        assert config.torch_skip_nan_gradients  # the default: ours only
+        config.torch_skip_nan_gradients = not rllib_guard
+        return config.build_learner(env=get_task("lac/PointHazard-v0").make({}))
+
+    ours, rllib = learner(rllib_guard=False), learner(rllib_guard=True)
+    rllib.set_state(ours.get_state())
+    for learner in (ours, rllib):
+        module = learner.module[DEFAULT_MODULE_ID]
+        params = list(learner.get_parameters(module.reward_critics))
+        gen = torch.Generator().manual_seed(0)
+        grads = {learner.get_param_ref(p): torch.randn(p.shape, generator=gen) for p in params}
+        first = learner.get_param_ref(params[0])
+        grads[first] = torch.full_like(grads[first], float("nan"))
+        learner.apply_gradients(grads)
+    for a, b in zip(ours.module[DEFAULT_MODULE_ID].reward_critics.parameters(),
+                    rllib.module[DEFAULT_MODULE_ID].reward_critics.parameters()):
+        assert torch.isfinite(a).all()
+        assert torch.equal(a, b)
