@@ -28,7 +28,7 @@ Prints a table with each phase's ratio baseline / current and writes it to ``--o
 float32 matmul floor of the current iteration's chains, timed in the same run, and the ratio an
 iteration would reach with the chain exactly at that floor (the ceiling of float32 on this CPU).
 
-``--cpus 2`` times the current configuration's whole iteration on one CPU and on two
+``--cpus 2`` times the current configuration's whole iteration, phase by phase, on one CPU and on two
 (``lac-train --cpus 2``: two env runners sample, two torch threads update; lac_rllib.algorithms.lac.config.use_cpus),
 same buffer, same run, and prints the ratio (issue 24's goal: >= 1.6x).
 
@@ -183,16 +183,23 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
             "chain floor": floor, "chains": len(calls)}
 
 
-def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> float:
-    """Mean wall seconds of ``iterations`` whole ``algo.train()`` calls (after one untimed, which
-    pays the compile and the runners' start) of the current defaults on ``cpus`` CPUs, the buffer
-    prefilled as in :func:`time_iteration`."""
+CPU_PHASES = ("sampling", "chain", "update", "other", "total")
+
+
+def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> dict[str, float]:
+    """Mean wall seconds per phase of ``iterations`` whole ``algo.train()`` calls (after one untimed,
+    which pays the compile and the runners' start) of the current defaults on ``cpus`` CPUs, the
+    buffer prefilled as in :func:`time_iteration`. Phases: sampling (``sample_into_replay``: the env
+    runners' sample, remote on N > 1 CPUs, and the buffer's add), chain (the Langevin chains inside
+    the learner, which is local), update (the rest of ``learner_group.update``), other (the rest)."""
+    import lac_rllib.algorithms.lac.module as module_mod
     from lac_rllib.algorithms.lac.config import build_config
 
     episodes, runner_state, capacity, per_iteration = prefill
     config = build_config(task, seed, {"random_iterations": 0, "actor_update_start_iteration": 0},
                           timesteps=10**9, cpus=cpus)
     algo = config.build_algo()
+    original_chain = module_mod.langevin_chain
     try:
         filter_state = {k: v for k, v in runner_state.items() if "connector" in k}
         algo.env_runner_group.foreach_env_runner(lambda r: r.set_state(filter_state), local_env_runner=True)
@@ -204,12 +211,33 @@ def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> 
                 algo.replay_buffer.add([dup])
                 rows += len(dup)
         algo.train()  # untimed: the compile, the runners' first sample
+        clock = _Clock()
+        algo.sample_into_replay = clock.wrap("sampling", algo.sample_into_replay)
+        algo.learner_group.update = clock.wrap("learner", algo.learner_group.update)
+        module_mod.langevin_chain = clock.wrap("chain", original_chain)
         t0 = time.perf_counter()
         for _ in range(iterations):
             algo.train()
-        return (time.perf_counter() - t0) / iterations
+        total = time.perf_counter() - t0
     finally:
+        module_mod.langevin_chain = original_chain
         algo.stop()
+    s = {k: v / iterations for k, v in clock.seconds.items()}
+    total /= iterations
+    return {"sampling": s["sampling"], "chain": s["chain"], "update": s["learner"] - s["chain"],
+            "other": total - s["sampling"] - s["learner"], "total": total}
+
+
+def cpus_table(task: str, cpus: int, one: dict[str, float], many: dict[str, float]) -> str:
+    """The phases on 1 and ``cpus`` CPUs and their ratios (markdown)."""
+    lines = [f"### {task}", "", f"| phase | 1 CPU (s) | {cpus} CPUs (s) | ratio |", "|---|---:|---:|---:|"]
+    for phase in CPU_PHASES:
+        ratio = one[phase] / many[phase] if many[phase] > 0 else float("nan")
+        name = f"**{phase}**" if phase == "total" else phase
+        lines.append(f"| {name} | {one[phase]:.1f} | {many[phase]:.1f} | {ratio:.2f}x |")
+    lines += ["", f"Whole iteration, the defaults: {one['total']:.1f} s on 1 CPU, {many['total']:.1f} s on "
+              f"{cpus} CPUs: {one['total'] / many['total']:.2f}x."]
+    return "\n".join(lines)
 
 
 def time_algorithm(algo: str, task: str, seed: int, steps: int) -> dict[str, float]:
@@ -327,8 +355,7 @@ def main(argv=None) -> int:
         for task in args.tasks:
             prefill = prefill_episodes(task, args.seed)
             one, many = (time_cpus(task, n, args.seed, prefill) for n in (1, args.cpus))
-            text = (f"### {task}\n\nWhole iteration, the defaults: {one:.1f} s on 1 CPU, {many:.1f} s on "
-                    f"{args.cpus} CPUs: {one / many:.2f}x.")
+            text = cpus_table(task, args.cpus, one, many)
             print(text + "\n", flush=True)
             out += [text, ""]
         if args.out:
