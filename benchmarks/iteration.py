@@ -28,9 +28,10 @@ Prints a table with each phase's ratio baseline / current and writes it to ``--o
 float32 matmul floor of the current iteration's chains, timed in the same run, and the ratio an
 iteration would reach with the chain exactly at that floor (the ceiling of float32 on this CPU).
 
-``--cpus 2`` times the current configuration's whole iteration, phase by phase, on one CPU and on two
-(``lac-train --cpus 2``: two env runners sample, two torch threads update; lac_rllib.algorithms.lac.config.use_cpus),
-same buffer, same run, and prints the ratio (issue 24's goal: >= 1.6x).
+``--cpus 2`` times the whole iteration of the current configuration (and of each ``--variant``),
+phase by phase, on one CPU and on two (``lac-train --cpus 2``: two env runners sample, two torch
+threads update; lac_rllib.constrained.cpus.use_cpus), same buffer, same run, and prints the ratio
+(issue 24's goal: >= 1.6x).
 
 ``--algos lac,ppo_lag,sac_lag`` times each algorithm at the task's preset on one CPU, same run:
 seconds per ``--steps`` env steps (default 20k) of training after a warm-up of as many (LAC with its
@@ -186,9 +187,9 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
 CPU_PHASES = ("sampling", "chain", "update", "other", "total")
 
 
-def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> dict[str, float]:
+def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2, sets: dict | None = None) -> dict:
     """Mean wall seconds per phase of ``iterations`` whole ``algo.train()`` calls (after one untimed,
-    which pays the compile and the runners' start) of the current defaults on ``cpus`` CPUs, the
+    which pays the compile and the runners' start) of the current defaults (and ``sets``) on ``cpus`` CPUs, the
     buffer prefilled as in :func:`time_iteration`. Phases: sampling (``sample_into_replay``: the env
     runners' sample, remote on N > 1 CPUs, and the buffer's add), chain (the Langevin chains inside
     the learner, which is local), update (the rest of ``learner_group.update``), other (the rest)."""
@@ -196,7 +197,7 @@ def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2) -> 
     from lac_rllib.algorithms.lac.config import build_config
 
     episodes, runner_state, capacity, per_iteration = prefill
-    config = build_config(task, seed, {"random_iterations": 0, "actor_update_start_iteration": 0},
+    config = build_config(task, seed, {"random_iterations": 0, "actor_update_start_iteration": 0, **(sets or {})},
                           timesteps=10**9, cpus=cpus)
     algo = config.build_algo()
     original_chain = module_mod.langevin_chain
@@ -352,12 +353,16 @@ def main(argv=None) -> int:
             Path(args.out).write_text("\n".join(out))
         return 0
     if args.cpus:
+        # The current defaults, then each --variant (e.g. bf16:langevin_dtype=bfloat16), on 1 and N CPUs.
         for task in args.tasks:
             prefill = prefill_episodes(task, args.seed)
-            one, many = (time_cpus(task, n, args.seed, prefill) for n in (1, args.cpus))
-            text = cpus_table(task, args.cpus, one, many)
-            print(text + "\n", flush=True)
-            out += [text, ""]
+            for name, sets in variants.items():
+                if name == "baseline":
+                    continue
+                one, many = (time_cpus(task, n, args.seed, prefill, sets=sets) for n in (1, args.cpus))
+                text = cpus_table(f"{task}, {name}", args.cpus, one, many)
+                print(text + "\n", flush=True)
+                out += [text, ""]
         if args.out:
             Path(args.out).parent.mkdir(parents=True, exist_ok=True)
             Path(args.out).write_text("\n".join(out))
