@@ -31,7 +31,8 @@ iteration would reach with the chain exactly at that floor (the ceiling of float
 ``--cpus 2`` times the whole iteration of the current configuration (and of each ``--variant``),
 phase by phase, on one CPU and on two (``lac-train --cpus 2``: two env runners sample, two torch
 threads update; lac_rllib.constrained.cpus.use_cpus), same buffer, same run, and prints the ratio
-(issue 24's goal: >= 1.6x).
+(issue 24's goal: >= 1.6x). With ``--algos`` too: each algorithm's seconds per ``--steps`` env
+steps on one CPU and on N, and their ratio.
 
 ``--algos lac,ppo_lag,sac_lag`` times each algorithm at the task's preset on one CPU, same run:
 seconds per ``--steps`` env steps (default 20k) of training after a warm-up of as many (LAC with its
@@ -241,15 +242,17 @@ def cpus_table(task: str, cpus: int, one: dict[str, float], many: dict[str, floa
     return "\n".join(lines)
 
 
-def time_algorithm(algo: str, task: str, seed: int, steps: int) -> dict[str, float]:
+def time_algorithm(algo: str, task: str, seed: int, steps: int, cpus: int = 1, threads: int = 1) -> dict[str, float]:
     """Seconds of ``algo``'s training over ``steps`` env steps after a warm-up of ``steps``, its
     update calls, and the seconds of one update call of one minibatch (RLlib's per-call overhead
-    plus one step)."""
+    plus one step); on ``cpus`` CPUs (lac-train --cpus), or with ``threads`` learner threads."""
     from lac_rllib.algorithms.registry import build_config
 
     sets = {"lac": {"random_iterations": 0, "actor_update_start_iteration": 0},
             "sac_lag": {"random_env_steps": steps // 2}}.get(algo, {})
-    config = build_config(algo, task, seed, sets, timesteps=10**9)
+    if threads > 1:
+        sets = {**sets, "torch_threads": threads}
+    config = build_config(algo, task, seed, sets, timesteps=10**9, cpus=cpus)
     algo_obj = config.build_algo()
     try:
         def lifetime():
@@ -335,6 +338,22 @@ def main(argv=None) -> int:
     what = f"on 1 and {args.cpus} CPUs" if args.cpus else "one CPU"
     out = [f"One LAC iteration per configuration, {what}. {runtime_versions()}, "
            f"torch {torch.__version__}, CPU capability {torch.backends.cpu.get_cpu_capability()}.", ""]
+    if args.algos and args.cpus:
+        for task in args.tasks:
+            lines = [f"### {task}", "", f"| algorithm | s per {args.steps:,} env steps, 1 CPU | {args.cpus} CPUs | "
+                     "ratio |", "|---|---:|---:|---:|"]
+            for a in args.algos.split(","):
+                one = time_algorithm(a, task, args.seed, args.steps)["seconds"]
+                try:
+                    many, how = time_algorithm(a, task, args.seed, args.steps, cpus=args.cpus)["seconds"], ""
+                except ValueError:  # its envs do not split over the runners: the learner's threads only
+                    many = time_algorithm(a, task, args.seed, args.steps, threads=args.cpus)["seconds"]
+                    how = f" (one env runner, {args.cpus} learner threads: its envs do not split)"
+                lines.append(f"| {a}{how} | {one:.1f} | {many:.1f} | {one / many:.2f}x |")
+                print(lines[-1], flush=True)
+            out += [*lines, ""]
+        print("\n".join(out))
+        return 0
     if args.algos:
         for task in args.tasks:
             lines = [f"### {task}", "", f"| algorithm | s per {args.steps:,} env steps | / LAC | update calls | "
