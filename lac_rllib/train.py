@@ -39,10 +39,15 @@ def _fmt(x) -> str:
 CHECKPOINT, PROGRESS, CONFIG = "checkpoint", "progress.jsonl", "config.json"
 
 
+#: The key of config.json that holds what rule-valued fields resolved to (SafeTaskConfig.resolved).
+RESOLVED = "resolved"
+
+
 def run_config(config) -> dict:
     """What ``config.json`` in a run's output holds (and what ``--resume`` compares)."""
     return json.loads(json.dumps({"task": config.task_id, "seed": config.seed,
-                                  registry.ALGO_FIELD: config.algo_class.ALGO, **config.params()}, default=str))
+                                  registry.ALGO_FIELD: config.algo_class.ALGO, **config.params(),
+                                  RESOLVED: config.resolved()}, default=str))
 
 
 def resumable_checkpoint(output: str) -> str | None:
@@ -83,6 +88,8 @@ def check_output(output: str, config, resume: bool) -> None:
     with open(os.path.join(output, CONFIG)) as f:
         old = {registry.ALGO_FIELD: registry.DEFAULT_ALGO, **json.load(f)}  # runs before 0.2 name no algo: LAC
     new = run_config(config)
+    if RESOLVED not in old:  # runs that recorded no resolution: their explicit values were it
+        new.pop(RESOLVED)
     speed = registry.algo_config(new[registry.ALGO_FIELD]).SPEED_FIELDS
     diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in speed)
     if "total_env_steps" in diff and _lr_horizon(old) == _lr_horizon(new):

@@ -26,6 +26,8 @@ from mlflow.exceptions import MlflowException  # noqa: E402
 from mlflow.tracking import MlflowClient  # noqa: E402
 
 SWEEP_TAG, TRIAL_TAG, NODE_TAG = "lac.sweep", "lac.trial_id", "lac.node_id"
+#: Tags "lac.resolved.<field>": what a rule-valued field ("auto") ran as on the trial's latest node.
+RESOLVED_TAG_PREFIX = "lac.resolved."
 CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
 ERROR_TAG = "lac.error"  # the last error of a failed attempt (cleared when a retry starts)
 STATUS_TAG = "lac.sweep_status"  # on the parent run: finished | interrupted

@@ -49,6 +49,7 @@ from sweeps.tracking import (
     P_TASK,
     P_TASK_SOURCE,
     P_TIMESTEPS,
+    RESOLVED_TAG_PREFIX,
     TrialTracker,
     learning_curve,
 )
@@ -110,7 +111,9 @@ class LACTrainable(tune.Trainable):
         self.logged_up_to = self.tracker.logged_up_to(ENV_STEPS)
         if self.logged_up_to and not self.already_finished:
             self.tracker.set_tags({"lac.resumed_after_env_steps": self.logged_up_to})
-        self.tracker.set_tags({NODE_TAG: tags[NODE_TAG]})  # the node of the latest (re)start
+        # The node of the latest (re)start, and what rule-valued fields ("auto") resolved to there.
+        self.tracker.set_tags({NODE_TAG: tags[NODE_TAG],
+                               **{f"{RESOLVED_TAG_PREFIX}{k}": v for k, v in self.lac_config.resolved().items()}})
         self.tracker.log_text(json.dumps({**params, COST_LIMIT: self.lac_config.effective_cost_limit},
                                          indent=2, default=str), "config.json")
 

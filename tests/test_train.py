@@ -128,3 +128,35 @@ def test_resume_may_raise_the_budget_only_where_the_lr_horizon_stays(tmp_path):
     (tmp_path / CONFIG).write_text(json.dumps(run_config(own)))
     with pytest.raises(ValueError, match=r"total_env_steps=1000 \(now 4000\)"):
         check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {}, timesteps=4000), resume=True)
+
+
+def _fake_checkpoint(path, config):
+    (path / "checkpoint").mkdir()
+    (path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({
+        "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
+        "lac_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
+
+
+def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path, monkeypatch):
+    """langevin_dtype=auto is bfloat16 on a CPU with native bf16 and float32 elsewhere: config.json
+    says which this run used, and a resume where it resolves otherwise is refused (other numerics);
+    a run that recorded no resolution (before it was recorded) still resumes."""
+    import lac_rllib.algorithms.lac.energy as energy
+
+    monkeypatch.setattr(energy, "cpu_flags", lambda: {"avx2", "avx512_bf16"})
+    config = build_config("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
+    started = run_config(config)
+    assert started["langevin_dtype"] == "auto" and started["resolved"] == {"langevin_dtype": "bfloat16"}
+    (tmp_path / CONFIG).write_text(json.dumps(started))
+    _fake_checkpoint(tmp_path, config)
+    check_output(str(tmp_path), config, resume=True)  # same machine kind: resumes
+
+    monkeypatch.setattr(energy, "cpu_flags", lambda: {"avx2"})
+    elsewhere = build_config("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
+    assert elsewhere.resolved() == {"langevin_dtype": "float32"}
+    refused = r"resolved=\{'langevin_dtype': 'bfloat16'\} \(now \{'langevin_dtype': 'float32'\}\)"
+    with pytest.raises(ValueError, match=refused):
+        check_output(str(tmp_path), elsewhere, resume=True)
+
+    (tmp_path / CONFIG).write_text(json.dumps({k: v for k, v in started.items() if k != "resolved"}))
+    check_output(str(tmp_path), elsewhere, resume=True)

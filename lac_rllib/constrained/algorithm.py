@@ -70,6 +70,7 @@ class SafeAlgorithm(Algorithm):
             "cost_limit": cfg.effective_cost_limit,
             "episode_cost_discount": cfg.effective_episode_cost_discount,
             "lac_config": cfg.params(),  # the algorithm's fields (the key name predates the baselines)
+            "resolved": cfg.resolved(),  # what rule-valued fields ("auto") ran as on the learner's machine
         }
         if cfg.task_spec is not None and cfg.task_spec.factory == user_tasks.FACTORY:
             ours["task_definition"] = user_tasks.definition(cfg.task_spec)  # restorable where it is not registered

@@ -96,6 +96,12 @@ class SafeTaskConfig:
         """The algorithm's own fields (``PARAMS``) as a plain dict: run metadata, config.json, MLflow params."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self.PARAMS)}
 
+    def resolved(self) -> dict[str, Any]:
+        """What fields whose value is a rule ("auto") resolve to on this machine (none here; LAC's
+        ``langevin_dtype``): recorded beside the params (config.json, checkpoint metadata, an MLflow
+        tag) so a run says what it ran, and a resume on a machine resolving otherwise is refused."""
+        return {}
+
     @property
     def task_spec(self):
         if self.task_id and getattr(self, "_task_spec", None) is None:

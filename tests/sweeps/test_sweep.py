@@ -81,6 +81,8 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
         assert {"task", "seed", "temperature", "beta", "langevin_start", "swept_param"} <= set(c.data.params)
         assert float(c.data.params["obs_std_floor"]) == 0.05  # --set reaches every trial
         assert c.data.tags.get("lac.node_id")
+        # what the tiny preset's float32 chain ran as (a rule like "auto" would say what it resolved to)
+        assert c.data.tags["lac.resolved.langevin_dtype"] == "float32"
         hist = client.get_metric_history(c.info.run_id, "episode_cost")
         assert [m.step for m in hist] == [500, 1000, 1500, 2000]
         for key in ("episode_return", "cost_limit", "nu", "critic_loss", "actor_loss", "env_steps", "wall_time_s",

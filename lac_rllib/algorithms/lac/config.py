@@ -23,6 +23,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.energy import DTYPE_CHOICES as LANGEVIN_DTYPES
+from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.algorithms.lac.networks import ACTIVATIONS
 from lac_rllib.constrained import fields
@@ -85,9 +86,11 @@ class LACParams(SafeTaskParams):
     langevin_dtype: str = param("float32", accepts=one_of(LANGEVIN_DTYPES))
     """Input dtype of the chain's critic matmuls (action, energy and update stay float32) [D]:
     "float32", "bfloat16", or "auto" = bfloat16 on a CPU with native bf16 matmuls (AVX512-BF16,
-    AMX), float32 elsewhere, decided where the module is built. float32 by default: bfloat16 is far
-    slower without native support (docs/speed.md), and its learning curve is checked against
-    float32's in docs/fidelity/; its end points differ from float32's by far less than the chain's
+    AMX), float32 elsewhere, decided where the module is built and recorded as what it resolved to
+    (config.json's ``resolved``, the checkpoint's metadata, the MLflow tag
+    ``lac.resolved.langevin_dtype``; a resume where it resolves otherwise is refused). float32 by
+    default: bfloat16 is far slower without native support (docs/speed.md), and its learning curve
+    is checked against float32's in docs/fidelity/; its end points differ from float32's by far less than the chain's
     own noise (tests/algorithms/lac/test_energy.py)."""
 
     # --- critics (docs/spec.md §2, eqs. 12-13) ---
@@ -226,6 +229,11 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         self.clip_actions = True  # the env clips; the actor is unsquashed [C]
         self.normalize_actions = False
         self.rollout_fragment_length = "auto"
+
+    def resolved(self) -> dict[str, Any]:
+        """``langevin_dtype`` as the chain runs it here: "auto" is bfloat16 on a CPU with native bf16
+        matmuls, else float32 (lac_rllib.algorithms.lac.energy.resolve_dtype)."""
+        return {"langevin_dtype": resolve_dtype(self.langevin_dtype)}
 
     @override(AlgorithmConfig)
     def training(self, **kwargs) -> "LACConfig":
