@@ -151,6 +151,20 @@ def load_curves(out: Path, include: list[Path] = ()):
     return df
 
 
+def earlier_commands(include: list[Path], runs: list[tuple[str, int]]) -> list[str]:
+    """The commands of ``runs`` (variant, seed) as the earlier reports beside the included
+    curves.csv files wrote them (their table.md's command block: the line whose output ends in
+    runs/<variant>/seed<k>)."""
+    wanted = tuple(f"/runs/{v}/seed{s}" for v, s in runs)
+    found = []
+    for csv in include:
+        table = Path(csv).with_name("table.md")
+        for line in table.read_text().splitlines() if table.exists() else []:
+            if "--output" in line and line.split("--output", 1)[1].split()[0].endswith(wanted):
+                found.append(line.strip())
+    return list(dict.fromkeys(found))
+
+
 def _fmt(mean: float, std: float | None) -> str:
     if mean is None or (isinstance(mean, float) and math.isnan(mean)):
         return "–"
@@ -247,6 +261,7 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
     if earlier:
         budget += ("\n\nFrom earlier reports' curves (" + ", ".join(str(p) for p in include) + "), their run "
                    "directories gone: " + ", ".join(f"{v} seed {s_}" for v, s_ in earlier) + ".")
+        commands += sorted(earlier_commands(include, earlier))
     text = (f"# {task}: learning curves\n\n"
             f"Budget per run: {f'{timesteps:,} env steps' if timesteps else 'see the commands'}; reached:\n{budget}\n\n"
             f"{table}\n\n![curves](curves.png)\n\nCommands:\n\n```\n" + "\n".join(commands) + "\n```\n")

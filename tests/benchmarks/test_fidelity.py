@@ -39,8 +39,15 @@ def test_included_curves_add_the_runs_not_on_disk_and_disk_wins(fidelity, tmp_pa
     assert runs == {0: [1.0, 2.0, 3.0], 1: [7.0, 8.0, 9.0, 10.0]}
     assert list(fidelity.load_curves(now)["seed"].unique()) == [1]  # nothing included unless asked
 
+    (earlier / "table.md").write_text(  # what an earlier report listed: its commands survive with its curves
+        "Commands:\n\n```\nlac-train --seed 0 --output /gone/runs/ppo_lag/seed0 --algo ppo_lag\n"
+        "lac-train --seed 1 --output /gone/runs/ppo_lag/seed1 --algo ppo_lag\n```\n")
+    (now / "runs" / "ppo_lag" / "seed1" / "command.txt").write_text("lac-train --output /now/runs/ppo_lag/seed1")
     text = fidelity.report(now, "lac/PointHazard-v0", ["ppo_lag"], None, include=[earlier / "curves.csv"])
     assert "their run directories gone: ppo_lag seed 0." in text
+    commands = text.split("Commands:")[1]
+    assert "/gone/runs/ppo_lag/seed0" in commands and "/now/runs/ppo_lag/seed1" in commands
+    assert "/gone/runs/ppo_lag/seed1" not in commands  # the run on disk replaced it
     assert "Compared at 3,000 env steps" in text  # seed 0's 3k is the fewest reached
 
 
