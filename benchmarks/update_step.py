@@ -1,15 +1,15 @@
-"""Cost of RLlib's per-tensor NaN/inf gradient tests against our one test per step, same run.
+"""One gradient step of each algorithm: RLlib's NaN/inf guard against ours, same run.
 
-    python benchmarks/nan_guard.py [--task SafetyPointGoal1-v0] [--steps 300] [--repeats 3]
+    python benchmarks/update_step.py [--task SafetyPointGoal1-v0] [--steps 300] [--repeats 3]
 
-Our configs set ``torch_skip_nan_gradients`` and our learners guard all gradients in one test
-(lac_rllib/constrained/gradients.py); ``rllib guard`` turns RLlib's per-tensor tests back on (ours
-still runs first, so it is the old path plus one cheap test). For each algorithm at the task's
-preset, two algorithms are built with the same seed, their data made the same way, and their
-updates timed interleaved:
+The guard: RLlib's per-tensor tests (``torch_skip_nan_gradients=False``; ours still runs first,
+one cheap test more) against ours alone (lac_rllib/constrained/gradients.py), the same update bit
+for bit (tests/constrained/test_gradients.py). For each algorithm at the task's preset, two
+algorithms are built with the same seed, their data made the same way, and their updates timed
+interleaved:
 - lac, sac_lag: ms per gradient step of ``update_from_replay`` over ``--steps`` 256-row minibatches
-  (LAC: a tenth of them, its chain makes each step ~0.3 s)
-  of the replay buffer (after 2,000 env steps of random actions);
+  of the replay buffer, after 2,000 env steps of random actions (LAC: a tenth of the steps, its
+  chain makes each ~0.3 s);
 - ppo_lag: ms per gradient step of one iteration's update (40 epochs of 64-row minibatches, the
   KL early stop off so that both make every step), on 2,000 env steps per iteration.
 Prints the medians and the ratio; one torch thread, one CPU.
@@ -23,7 +23,8 @@ import sys
 import time
 
 
-def _build(algo: str, task: str, rllib_guard: bool):
+def _build(algo: str, task: str, defaults: bool):
+    """The algorithm as we configure it, or (``defaults``) with RLlib's per-tensor NaN tests."""
     from lac_rllib.algorithms.registry import build_config
 
     sets = {"lac": {"random_iterations": 1, "env_steps_per_iteration": 2000},
@@ -31,7 +32,7 @@ def _build(algo: str, task: str, rllib_guard: bool):
             # No KL early stop: every epoch makes all its steps, whatever the data.
             "ppo_lag": {"train_batch_size_per_learner": 2000, "target_kl": None}}[algo]
     config = build_config(algo, task, 0, sets, timesteps=10**7)
-    config.torch_skip_nan_gradients = not rllib_guard
+    config.torch_skip_nan_gradients = not defaults
     return config.build_algo()
 
 
@@ -77,23 +78,23 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(1)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
-    lines = ["| algorithm | ms per step, RLlib's per-tensor tests | ms per step, ours | ratio |",
+    lines = ["| algorithm | ms per step, RLlib's guard | ms per step, ours | ratio |",
              "|---|---:|---:|---:|"]
     for name in args.algos.split(","):
-        algos = {guard: _build(name, args.task, guard) for guard in (True, False)}
+        algos = {defaults: _build(name, args.task, defaults) for defaults in (True, False)}
         try:
             if name != "ppo_lag":
                 for a in algos.values():
                     a.train()  # fills the buffer (random actions)
                     _timed_update(name, a, 10)  # warm-up: a compile (LAC's chain), first allocations
-            times = {guard: [] for guard in algos}
+            times = {defaults: [] for defaults in algos}
             for _ in range(args.repeats):
-                for guard, a in algos.items():
-                    times[guard].append(_timed_update(name, a, args.steps // 10 if name == "lac" else args.steps))
+                for defaults, a in algos.items():
+                    times[defaults].append(_timed_update(name, a, args.steps // 10 if name == "lac" else args.steps))
         finally:
             for a in algos.values():
                 a.stop()
-        old, new = (1e3 * statistics.median(times[g]) for g in (True, False))
+        old, new = (1e3 * statistics.median(times[d]) for d in (True, False))
         lines.append(f"| {name} | {old:.2f} | {new:.2f} | {old / new:.2f}x |")
         print(lines[-1], flush=True)
     print("\n".join(lines))
