@@ -5,10 +5,11 @@ for any change that can alter what the agent learns (defaults, numerics, samplin
         --variant new --variant "old:langevin_grad_clip=None,nu_max_adaptive=False" \\
         --out docs/fidelity/pointgoal1
 
-Each (variant, seed) is one ``lac-train`` run (a subprocess, niced, one torch thread), at most
-``--parallel`` at a time (default: the CPUs). A variant is ``NAME`` or ``NAME:field=value,...``
-on top of the defaults and ``--set`` (``algo=ppo_lag`` or ``algo=sac_lag`` among them trains that
-baseline). Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
+Each (variant, seed) is one ``lac-train`` run (a subprocess, niced, on ``--cpus`` CPUs: one by
+default, two for ``lac-train --cpus 2``'s two env runners and learner threads), at most
+``--parallel`` at a time (default: the machine's CPUs over ``--cpus``). A variant is ``NAME`` or
+``NAME:field=value,...`` on top of the defaults and ``--set`` (``algo=ppo_lag`` or ``algo=sac_lag``
+among them trains that baseline). Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
 one line per iteration and a checkpoint every ``--checkpoint-every`` iterations, and the report is rebuilt every
 ``--report-every`` seconds while runs go, so a run stopped mid-way (session end, Ctrl-C) leaves
 curves up to its last iteration; ``--resume`` continues such runs from their checkpoints (the same
@@ -89,7 +90,7 @@ def run_dir(out: Path, variant: str, seed: int) -> Path:
 
 
 def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int,
-           resume: bool = False, checkpoint_every: int = 2):
+           resume: bool = False, checkpoint_every: int = 2, cpus: int = 1):
     from lac_rllib.train import resumable_checkpoint
 
     d = run_dir(out, variant, seed)
@@ -99,6 +100,8 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
            "--timesteps", str(timesteps), "--output", str(d), "--checkpoint-every", str(checkpoint_every)]
     if algo != "lac":
         cmd += ["--algo", algo]
+    if cpus != 1:
+        cmd += ["--cpus", str(cpus)]  # lac-train's: N env runners and N learner threads
     if resume and resumable_checkpoint(str(d)):
         cmd.append("--resume")  # lac-train checks that the settings are the run's
     else:
@@ -108,7 +111,7 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
         cmd += ["--set", p]
     (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]).replace(" --resume", "") + "\n")
     log = open(d / "train.log", "a" if "--resume" in cmd else "w")
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    env = {**os.environ, "OMP_NUM_THREADS": str(cpus)}
     # Started at normal priority: Ray gives its raylet a fixed 30 s to register, which a niced
     # start on a busy machine misses; the run is niced once Ray is up (lower_priority).
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=ROOT, start_new_session=True)
@@ -279,7 +282,10 @@ def main(argv=None) -> int:
     parser.add_argument("--variant", action="append", default=[], metavar="NAME[:F=V,...]",
                         help="a configuration to run (repeatable; default: one variant 'defaults')")
     parser.add_argument("--out", required=True, help="report directory (e.g. docs/fidelity/pointgoal1)")
-    parser.add_argument("--parallel", type=int, default=os.cpu_count(), help="runs at a time")
+    parser.add_argument("--parallel", type=int, default=None, help="runs at a time (default: CPUs / --cpus)")
+    parser.add_argument("--cpus", type=int, default=1,
+                        help="CPUs per run (lac-train --cpus: env runners and learner threads); --parallel "
+                             "counts runs, so --parallel 1 --cpus 2 fills two cores")
     parser.add_argument("--nice", type=int, default=10, help="niceness of the runs (Ray's workers use 15)")
     parser.add_argument("--checkpoint-every", type=int, default=2,
                         help="iterations between a run's checkpoints (what --resume continues from)")
@@ -304,8 +310,10 @@ def main(argv=None) -> int:
         if len({v for v, _ in variants}) != len(variants):
             raise ValueError("--variant names must be distinct")
         seeds = [int(s) for s in args.seed_list.split(",")] if args.seed_list else list(range(args.seeds))
-        if not seeds or args.timesteps < 1 or args.parallel < 1 or args.checkpoint_every < 1:
-            raise ValueError("need at least one seed, --timesteps, --parallel and --checkpoint-every >= 1")
+        if args.parallel is None:
+            args.parallel = max(1, (os.cpu_count() or 1) // max(args.cpus, 1))
+        if not seeds or args.timesteps < 1 or args.parallel < 1 or args.checkpoint_every < 1 or args.cpus < 1:
+            raise ValueError("need at least one seed, --timesteps, --parallel, --checkpoint-every and --cpus >= 1")
     except ValueError as e:
         parser.exit(2, f"fidelity: error: {e}\n")
     order = [v for v, _ in variants]
@@ -327,7 +335,7 @@ def main(argv=None) -> int:
             while queue and len(running) < args.parallel:
                 v, pairs, s = queue.pop(0)
                 running.append((v, s, launch(out, args.task, v, [*args.set, *pairs], s, args.timesteps, args.resume,
-                                             args.checkpoint_every), time.time()))
+                                             args.checkpoint_every, args.cpus), time.time()))
                 print(f"started {v} seed {s}", flush=True)
             time.sleep(5)
             for item in running:

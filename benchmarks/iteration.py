@@ -350,9 +350,12 @@ def main(argv=None) -> int:
                     many = time_algorithm(a, task, args.seed, args.steps, threads=args.cpus)["seconds"]
                     how = f" (one env runner, {args.cpus} learner threads: its envs do not split)"
                 lines.append(f"| {a}{how} | {one:.1f} | {many:.1f} | {one / many:.2f}x |")
-                print(lines[-1], flush=True)
+                print(lines[-1], flush=True)  # progress; the table follows
             out += [*lines, ""]
         print("\n".join(out))
+        if args.out:
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.out).write_text("\n".join(out))
         return 0
     if args.algos:
         for task in args.tasks:
