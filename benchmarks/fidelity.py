@@ -111,7 +111,10 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
         cmd += ["--set", p]
     (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]).replace(" --resume", "") + "\n")
     log = open(d / "train.log", "a" if "--resume" in cmd else "w")
-    env = {**os.environ, "OMP_NUM_THREADS": str(cpus)}
+    # One OpenMP thread for every process of the run: its env runners inherit this, and two runners
+    # of two threads each oversubscribe two cores (half the time in the kernel); the learner sets its
+    # own threads (torch_threads, which --cpus sets).
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
     # Started at normal priority: Ray gives its raylet a fixed 30 s to register, which a niced
     # start on a busy machine misses; the run is niced once Ray is up (lower_priority).
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=ROOT, start_new_session=True)
