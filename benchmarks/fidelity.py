@@ -313,6 +313,10 @@ def main(argv=None) -> int:
         if len({v for v, _ in variants}) != len(variants):
             raise ValueError("--variant names must be distinct")
         seeds = [int(s) for s in args.seed_list.split(",")] if args.seed_list else list(range(args.seeds))
+        missing = [str(c) for c in args.include_curves if not Path(c).is_file()]
+        if missing:
+            raise ValueError(f"--include-curves {', '.join(missing)}: no such file; "
+                             "accepted: an earlier report's curves.csv")
         if args.parallel is None:
             args.parallel = max(1, (os.cpu_count() or 1) // max(args.cpus, 1))
         if not seeds or args.timesteps < 1 or args.parallel < 1 or args.checkpoint_every < 1 or args.cpus < 1:

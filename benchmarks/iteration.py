@@ -320,6 +320,8 @@ def main(argv=None) -> int:
 
     variants = {"baseline": BASELINE, "current": {}}
     try:
+        if args.cpus is not None and args.cpus < 1:
+            raise ValueError(f"--cpus {args.cpus}; accepted: an integer >= 1")
         for task in args.tasks:
             get_task(task)
         for text in args.variant:

@@ -49,6 +49,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", default="SafetyPointGoal1-v0")
     args = parser.parse_args(argv)
+    from lac_rllib.tasks import get_task
+
+    try:
+        get_task(args.task)
+    except ValueError as e:
+        parser.exit(2, f"point_turn: error: {str(e).splitlines()[0][:300]}\n")
     print("| turn command | heading rate (rad/s) | spread over steps |\n|---:|---:|---:|")
     for u, (mean, std) in heading_rates(args.task).items():
         print(f"| {u:g} | {mean:.3f} | {std:.3f} |")

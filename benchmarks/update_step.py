@@ -73,6 +73,18 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
+    from lac_rllib.algorithms.registry import check_algo
+    from lac_rllib.tasks import get_task
+
+    try:  # bad input, before Ray starts
+        get_task(args.task)
+        for name in args.algos.split(","):
+            check_algo(name)
+        if args.steps < 10 or args.repeats < 1:
+            raise ValueError(f"--steps {args.steps} / --repeats {args.repeats}; "
+                             "accepted: --steps >= 10, --repeats >= 1")
+    except ValueError as e:
+        parser.exit(2, f"update_step: error: {e}\n")
     import ray
     import torch
 
