@@ -102,10 +102,7 @@ def test_resume_may_change_speed_fields_only(tmp_path):
     config = build_config("lac/PointHazard-v0", 0, {}, timesteps=1000)
     started = {**run_config(config), "langevin_fused": False, "num_envs_per_env_runner": 2, "torch_threads": 2}
     (tmp_path / CONFIG).write_text(json.dumps(started))
-    (tmp_path / "checkpoint").mkdir()
-    (tmp_path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({  # what SafeAlgorithm writes
-        "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
-        "lac_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
+    _fake_checkpoint(tmp_path, config)  # what SafeAlgorithm writes
     check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 4}, timesteps=1000),
                  resume=True)
     with pytest.raises(ValueError, match=r"started with other settings: beta=0.0 \(now 0.5\)$"):
@@ -117,10 +114,7 @@ def test_resume_may_raise_the_budget_only_where_the_lr_horizon_stays(tmp_path):
     whose horizon is its budget is not, since a new budget would change its learning rates."""
     config = build_config("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=1000)
     (tmp_path / CONFIG).write_text(json.dumps(run_config(config)))
-    (tmp_path / "checkpoint").mkdir()
-    (tmp_path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({
-        "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
-        "lac_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
+    _fake_checkpoint(tmp_path, config)
     check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=4000),
                  resume=True)
     own = build_config("lac/PointHazard-v0", 0, {}, timesteps=1000)
