@@ -32,6 +32,13 @@ from sweeps.tracking import check_reachable, default_tracking_uri
 RATE = {"tiny": 405.0, "safety_gym": 377.0, "mujoco": 185.0}
 CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
 STARTUP_S = 15.0
+#: The most trials a sweep may plan unless --max-trials says more: counted before any is built
+#: (the plan holds each trial's resolved fields; ~10 ms and a few KB each).
+MAX_TRIALS = 5_000
+#: The flag each resolved key of a sweep comes from when it is given (sweep_file.Origin).
+FLAG_OF = {"task": "--task", "budget": "--budget", "num_samples": "--num-samples", "scheduler": "--scheduler",
+           "max_concurrent": "--max-concurrent", "cpus_per_trial": "--cpus-per-trial",
+           "experiment": "--experiment", "name": "--name"}
 # A baseline's update seconds per env step (SAC-Lag: per update per env step) at the tiny sizes.
 UPDATE_S_PER_STEP = {"ppo_lag": 2e-4, "sac_lag": 2e-3}
 
@@ -46,6 +53,13 @@ def _int_at_least(low: int):
             raise argparse.ArgumentTypeError(f"{text} is invalid; accepted: an integer >= {low}")
         return value
     return parse
+
+
+def _name(text: str) -> str:
+    try:
+        return sweep_file.check_name(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _budget(text: str) -> str | int:
@@ -87,9 +101,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--experiment", default=None, help="MLflow experiment name (default lac-sweeps)")
     p.add_argument("--storage", default="ray_results",
                    help="Tune storage path (on a cluster: an absolute path every node mounts)")
-    p.add_argument("--name", default=None, help="sweep name (default: FILE-TASK-BUDGET); --resume finds it by name")
+    p.add_argument("--name", type=_name, default=None,
+                   help="sweep name (default: FILE-TASK-BUDGET); --resume finds it by name")
     p.add_argument("--resume", action="store_true", help="continue the sweep of the same name")
     p.add_argument("--max-failures", type=_int_at_least(0), default=2, help="retries of a failed trial (node loss)")
+    p.add_argument("--max-trials", type=_int_at_least(1), default=MAX_TRIALS,
+                   help=f"refuse a sweep that plans more trials (default {MAX_TRIALS:,}; raise it on a cluster)")
     p.add_argument("--optuna-seed", type=int, default=0, help="seed of the search's sampler")
     p.add_argument("--optuna-storage", default=None,
                    help="Optuna storage URL of a search's study (default: optuna.db beside a local MLflow "
@@ -161,7 +178,7 @@ def make_plan(args) -> Plan:
     """The one pass from the command line to the trials: file and flags → the resolved sweep
     (:func:`resolve_sweep`) → its trials with their full configs (``spaces.trial_params``) → the
     estimate and where it goes (:func:`plan_sweep`). Every input is checked here, before Ray starts."""
-    sweep, space = resolve_sweep(args)
+    sweep, space, origin = resolve_sweep(args)
     address = args.address or os.environ.get("RAY_ADDRESS") or None
     infra = Infra(address=address, address_from="--address" if args.address else "RAY_ADDRESS" if address else None,
                   tracking_uri=args.tracking_uri or default_tracking_uri(), storage=args.storage,
@@ -174,22 +191,31 @@ def make_plan(args) -> Plan:
     check_reachable(infra.tracking_uri)
     # A user's env module is looked up on the Python path, then beside the sweep file, then here.
     search_dirs = ((str(Path(args.config).resolve().parent),) if args.config else ()) + (os.getcwd(),)
-    plan = plan_sweep(sweep, space, infra, search_dirs, source=args.config or f"--space {args.space}")
+    plan = plan_sweep(sweep, space, infra, search_dirs, origin, max_trials=args.max_trials)
     if args.confirm_top:
         plan = dataclasses.replace(plan, confirm=check_confirm(plan, args))
     return plan
 
 
 def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = (),
-               source: str = "the sweep") -> Plan:
+               origin: sweep_file.Origin | None = None, max_trials: int = MAX_TRIALS) -> Plan:
     """A resolved sweep's plan: its tasks (a user's env built and stepped once), its trials with
-    their fields resolved, the estimate, its name and storage."""
+    their fields resolved, the estimate, its name and storage. ``origin`` says where each key came
+    from (a file's line or a flag) for the errors; the trials are counted before any is built."""
+    origin = origin or sweep_file.Origin()
     cpus = sweep.cpus_per_trial
     if not infra.address and cpus > (os.cpu_count() or 1):
         # Tune would keep such a trial PENDING forever on the local Ray this command starts.
-        raise ValueError(f"--cpus-per-trial {cpus} is more than this machine's {os.cpu_count()} CPUs; "
+        raise ValueError(f"{origin(('cpus_per_trial',))} {cpus} is more than this machine's {os.cpu_count()} CPUs; "
                          f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
-    tasks, user_tasks = resolve_tasks(sweep, search_dirs, source)
+    tasks, user_tasks = resolve_tasks(sweep, search_dirs, origin)
+    seeds = sweep.seed_list()
+    count = sweep.num_samples * len(seeds) if sweep.is_search else spaces.count_trials(sweep, tasks)
+    if count > max_trials:
+        what = "num_samples × seeds" if sweep.is_search else "tasks × configurations × algorithms × seeds"
+        raise ValueError(f"{origin(('num_samples',) if sweep.is_search else ())}: the sweep plans {count:,} trials "
+                         f"({what}), more than --max-trials {max_trials:,}; accepted: a smaller sweep, or "
+                         "--max-trials N where a cluster can run them")
     sets = trial_sets(sweep)
     trials = None
     if not sweep.is_search:
@@ -200,8 +226,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     first = trials or [dataclasses.replace(spaces.trial_spec(
         {"task": tasks[0], "budget": sweep.budget, "sets": sets, "overrides": {}}), seed=0)]
     for t in first:
-        check_cpus(t.params.get("num_envs_per_env_runner", 1), cpus, "--cpus-per-trial")
-    seeds = sweep.seed_list()
+        check_cpus(t.params.get("num_envs_per_env_runner", 1), cpus, origin(("cpus_per_trial",)))
     # search: each sampled configuration is trained with every seed (sweeps/sweep.py, SeedRepeater)
     n_trials = len(trials) if trials is not None else sweep.num_samples * len(seeds)
     concurrency = min(sweep.max_concurrent or max(1, (os.cpu_count() or 1) // cpus), n_trials)
@@ -233,12 +258,12 @@ def check_confirm(plan: Plan, args) -> tuple[int, int, str | int]:
     return args.confirm_top, args.confirm_seeds or max(len(plan.seeds), 3), budget
 
 
-def resolve_sweep(args) -> tuple[SweepFile, str]:
+def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     """The sweep file (``--config``, or the built-in ``--space``) with the flags and the defaults
     applied, checked again as a whole: the sweep every later step reads, and ``sweep.yaml``.
-    Returns it and the sweep's kind (the built-in space or the file's stem)."""
+    Returns it, the sweep's kind (the built-in space or the file's stem) and where each key came from."""
     path = Path(args.config) if args.config else sweep_file.builtin_path(args.space)
-    base = sweep_file.load(path)
+    base, origin = sweep_file.load_with_origin(path)
     space = args.space or path.stem
     data = base.model_dump(exclude_none=True)
     if args.task:
@@ -261,6 +286,15 @@ def resolve_sweep(args) -> tuple[SweepFile, str]:
     for key in ("num_samples", "scheduler", "max_concurrent", "cpus_per_trial", "experiment"):
         if getattr(args, key) is not None:
             data[key] = getattr(args, key)
+    flags = {(k,): f for k, f in FLAG_OF.items() if getattr(args, k) is not None}
+    flags |= {("set", k): f"--set {k}" for k in cli_sets}
+    if algo_pairs:
+        flags[("algo",)] = f"--set {ALGO_FIELD}"
+    if args.seeds is not None:
+        flags[("seeds", "count")] = "--seeds"
+    if args.seed_start is not None:
+        flags[("seeds", "start")] = "--seed-start"
+    origin = origin.with_flags(flags)
     data.setdefault("task", [spaces.DEFAULT_TASK])
     data.setdefault("budget", "quick")
     data.setdefault("seeds", {"count": 3, "start": 0})
@@ -271,24 +305,22 @@ def resolve_sweep(args) -> tuple[SweepFile, str]:
     if base.is_search:
         data.setdefault("num_samples", 20)
     elif "groups" not in data:  # the file's one group (or one configuration), named after the file
-        data["groups"] = {space: {"grid": data.pop("grid", {})}} if data.get("grid") else {space: {}}
+        group = sweep_file.safe_name(space)
+        data["groups"] = {group: {"grid": data.pop("grid", {})}} if data.get("grid") else {group: {}}
     try:
         sweep = SweepFile.model_validate(data)
         sweep_file.check_fields(sweep)
     except sweep_file.FieldError as e:
-        flag = e.loc[0] == "set" and len(e.loc) > 1 and e.loc[1] in cli_sets
-        raise ValueError(f"--set {e.loc[1]}: {e.message}" if flag else
-                         f"{path}: {sweep_file._dotted(e.loc)}: {e.message}") from None
+        raise ValueError(f"{origin(e.loc)}: {e.message}") from None
     except ValidationError as e:  # a flag's value the file's schema refuses
-        err = e.errors()[0]
-        raise ValueError(f"{path} with the flags: {sweep_file._dotted(err['loc'])}: "
-                         f"{err['msg'].removeprefix('Value error, ')}") from None
+        raise ValueError(sweep_file.first_error(e, origin)) from None
     if args.name or not sweep.name:
         tasks = sweep.task
         what = (tasks[0] if isinstance(tasks[0], str) else tasks[0].task_id()).split("/")[-1] \
             if len(tasks) == 1 else f"{len(tasks)}-tasks"
-        sweep = sweep.model_copy(update={"name": args.name or f"{space}-{what}-{sweep.budget}"})
-    return sweep, space
+        # Derived from the file's stem and the task: made safe rather than refused (it becomes a path).
+        sweep = sweep.model_copy(update={"name": args.name or sweep_file.safe_name(f"{space}-{what}-{sweep.budget}")})
+    return sweep, space, origin
 
 
 def parse_set_pairs(pairs: list[str]) -> dict:
@@ -328,17 +360,21 @@ def trial_sets(sweep: SweepFile) -> dict:
     return sets
 
 
-def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), source: str = "the sweep"
+def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), origin: sweep_file.Origin | None = None
                   ) -> tuple[list[str], dict]:
     """The sweep's task ids, every one known here; a user's env is built once and stepped first
     (lac_rllib/tasks/user.py), its definition returned to travel with the trials."""
     from lac_rllib.tasks import get_task
     from lac_rllib.tasks.user import definition, user_task
 
+    origin = origin or sweep_file.Origin()
     ids, user = [], {}
     for i, task in enumerate(sweep.task):
         if isinstance(task, str):
-            get_task(task)  # unknown id -> ValueError listing the known ones
+            try:
+                get_task(task)  # unknown id -> ValueError naming the closest known ones
+            except ValueError as e:
+                raise ValueError(f"{origin(('task', i))}: {e}") from None
             ids.append(task)
             continue
         try:
@@ -346,7 +382,7 @@ def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), source: s
                              episode_cost_discount=task.episode_cost_discount, cost_key=task.cost_key,
                              preset=task.preset, kwargs=task.kwargs, search_dirs=search_dirs)
         except ValueError as e:
-            raise ValueError(f"{source}: task[{i}]: {e}") from None
+            raise ValueError(f"{origin(('task', i))}: {e}") from None
         ids.append(spec.id)
         user[spec.id] = definition(spec)
     return ids, user
@@ -434,6 +470,13 @@ def print_plan(plan: Plan) -> None:
     print(f"  browse: mlflow ui --backend-store-uri {infra.tracking_uri}", flush=True)
 
 
+def one_line(text: str, limit: int = 600) -> str:
+    """An error as one line of at most ``limit`` characters, whatever it quotes (a user's exception
+    included): the messages are written short, this is the guarantee."""
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def git_commit() -> str:
     try:
         return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
@@ -450,6 +493,9 @@ def main(argv=None) -> int:
     try:
         plan = make_plan(args)
         sweep_dir = Path(plan.storage) / plan.name
+        if sweep_dir.resolve().parent != Path(plan.storage).resolve():  # a safe name cannot; a link might
+            raise ValueError(f"sweep {plan.name!r}: its directory {sweep_dir} resolves outside --storage "
+                             f"{plan.storage}; accepted: a name whose directory lies in --storage")
         if args.resume and not (sweep_dir / SWEEP_FILE).exists():
             raise ValueError(f"--resume: no sweep named {plan.name!r} under {plan.storage}")
         if args.resume:
@@ -462,7 +508,7 @@ def main(argv=None) -> int:
         if not args.resume and started:
             raise ValueError(f"a sweep named {plan.name!r} exists under {plan.storage}; pass --resume or --name")
     except ValueError as e:
-        print(f"sweeps/run.py: error: {e}", file=sys.stderr)
+        print(f"sweeps/run.py: error: {one_line(str(e))}", file=sys.stderr)
         return 2
     lock = None
     if "://" not in plan.storage:  # object stores have no atomic create (sweeps/lock.py)

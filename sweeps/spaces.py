@@ -199,11 +199,23 @@ def groups_for(sweep, preset: str) -> dict:
     from sweeps.sweep_file import Group
 
     for at in sweep.groups_at:
-        if at.budget in (None, str(sweep.budget)) and at.preset in (None, preset):
+        if (at.budget is None or str(at.budget) == str(sweep.budget)) and at.preset in (None, preset):
             return at.groups
     if sweep.groups is not None:
         return sweep.groups
     return {sweep.name or "sweep": Group(grid=sweep.grid or {})}
+
+
+def count_trials(sweep, task_ids: list[str]) -> int:
+    """How many trials :func:`expand` would build, counted without building them (a sweep file
+    can ask for more than memory holds: sweeps/run.py refuses it first)."""
+    import math
+
+    from lac_rllib.tasks import get_task
+
+    per_config = len(sweep.algo if len(sweep.algo) > 1 else (None,)) * len(sweep.seed_list())
+    return sum(math.prod(len(v) for v in group.grid.values()) * per_config
+               for task in task_ids for group in groups_for(sweep, get_task(task).preset).values())
 
 
 def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:

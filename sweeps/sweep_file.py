@@ -5,8 +5,11 @@ below it: docs/sweeps.md's reference is generated from it (``python -m sweeps.sw
 file is checked in two passes before Ray starts, and every error is one line naming the file,
 the line, the key path and what is accepted:
 
-1. the structure (:meth:`SweepFile.model_validate`): unknown keys (with the closest name), types,
-   ranges, one distribution per searched field, an empty grid;
+0. the text (sweeps/bounded_yaml.py): size, encoding, nesting depth, aliases and what they expand
+   to, duplicate keys, all bounded before anything is built;
+1. the structure (:meth:`SweepFile.model_validate`): unknown keys (with the closest name), types
+   (strict: a boolean is never taken for a number), ranges and counts, names that become paths,
+   one distribution per searched field, an empty grid;
 2. the fields (:func:`check_fields`): every field in ``set``, ``grid``, ``groups`` and ``search``
    against the declaration of each algorithm the trial runs (lac_rllib/algorithms/registry.py):
    an unknown field (with the closest name), a value or distribution outside what the field
@@ -27,17 +30,21 @@ from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Discriminator,
     Field,
-    NonNegativeInt,
-    PositiveInt,
     Tag,
     ValidationError,
     field_validator,
     model_validator,
 )
+
+from lac_rllib.constrained.fields import excerpt
+from sweeps.bounded_yaml import YamlRefused
+from sweeps.bounded_yaml import read as read_yaml
+from sweeps.bounded_yaml import read_text as read_yaml_text
 
 BUILTIN_DIR = Path(__file__).with_name("builtin")
 BUDGET_NAMES = ("smoke", "quick", "paper")
@@ -46,9 +53,87 @@ SEARCHERS = ("grid", "random", "tpe", "motpe", "nsga2")
 MULTI_OBJECTIVE = ("motpe", "nsga2")
 Scalar = bool | int | float | str | None
 
+# Bounds on what one file may ask for: far above any sweep one machine or a modest cluster runs,
+# far below what would exhaust the driver's memory while the plan is made (the trial count itself
+# is bounded at plan time: sweeps/run.py --max-trials).
+MAX_SEEDS = 1_000  #: seeds per configuration
+MAX_SEED = 2**31 - 1  #: numpy's and gymnasium's seeds are 32-bit
+MAX_VALUES = 1_000  #: values of one grid field or one choice
+MAX_SAMPLES = 100_000  #: configurations a search samples
+MAX_BUDGET = 10**10  #: env steps per trial (the paper's is 2.5M)
+MAX_CPUS = 4_096  #: CPUs per trial, trials at once
+MAX_TEXT = 2_000  #: a description's characters
+
 
 class SweepFileError(ValueError):
     """A bad sweep file: ``FILE:LINE: key.path: what is wrong; accepted: ...`` (one line)."""
+
+
+class KeyedError(ValueError):
+    """A model validator's error that belongs to one key (``loc``), so the line can name it."""
+
+    def __init__(self, loc: tuple, message: str):
+        super().__init__(message)
+        self.loc = loc
+
+
+def Int(low: int, high: int):  # noqa: N802 (a type)
+    """An integer in [low, high]; strict: ``true`` is not 1 and ``2.0`` is not 2."""
+    return Annotated[int, Field(strict=True, ge=low, le=high)]
+
+
+#: A finite number; strict: ``true`` is not 1.0, ``"1"`` is not 1.0 (an integer is a number).
+Real = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+
+#: A name that becomes a path or part of one (a sweep's directory under --storage, a group's
+#: trial names): ASCII letters, digits, ``_ . -``, not starting with ``.`` or ``-``, no ``..``.
+SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,99}")
+SAFE_NAME_TEXT = ("letters, digits, _ . - (ASCII; not starting with . or -, no '..', "
+                  "at most 100 characters)")
+
+
+def check_name(v: str, what: str = "name") -> str:
+    """``v`` if it is a safe name (:data:`SAFE_NAME`), else a ValueError naming it and the rule."""
+    if not isinstance(v, str) or not SAFE_NAME.fullmatch(v) or ".." in v:
+        raise ValueError(f"{what} {excerpt(v)} is refused (it becomes a path); accepted: {SAFE_NAME_TEXT}")
+    return v
+
+
+def _task_name(v: str) -> str:
+    """A user task's name: safe names joined by ``/`` (``user/my-env``), none empty or ``..``."""
+    parts = v.split("/") if isinstance(v, str) else [v]
+    if len(parts) > 4 or any(not SAFE_NAME.fullmatch(p) or ".." in p for p in parts):
+        raise ValueError(f"name {excerpt(v)} is refused; accepted: up to 4 parts joined by /, each of "
+                         f"{SAFE_NAME_TEXT}")
+    return v
+
+
+def _display_name(v: str) -> str:
+    """An MLflow experiment's name: printable text, no surrounding blanks, 1..200 characters."""
+    if not (0 < len(v) <= 200 and v.isprintable() and v == v.strip()):
+        raise ValueError(f"experiment {excerpt(v)} is refused; accepted: 1..200 printable characters, "
+                         "no leading or trailing blanks")
+    return v
+
+
+def safe_name(text: str) -> str:
+    """A name derived from something else (a file's stem, a task id) made safe rather than refused:
+    every character outside the safe set becomes ``_``."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", text).replace("..", "_").lstrip(".-")[:100]
+    return name or "sweep"
+
+
+SafeName = Annotated[str, AfterValidator(check_name)]
+
+
+def _budget_value(v: Any) -> Any:
+    if v is None or (isinstance(v, str) and v in BUDGET_NAMES):
+        return v
+    if isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= MAX_BUDGET:
+        return v
+    what = "unknown budget" if isinstance(v, str) else "budget"
+    raise ValueError(f"{what} {excerpt(v)} is invalid; accepted: {' | '.join(BUDGET_NAMES)} or env steps "
+                     f"(an integer 1..{MAX_BUDGET:,})")
 
 
 def _schema_config(**extra) -> ConfigDict:
@@ -59,11 +144,11 @@ class Seeds(BaseModel):
     """``count`` seeds from ``start``: start, start + 1, ...; or an explicit ``list``."""
 
     model_config = _schema_config()
-    count: PositiveInt | None = None
+    count: Int(1, MAX_SEEDS) | None = None
     """How many seeds per configuration (a search: per sampled configuration)."""
-    start: NonNegativeInt = 0
+    start: Int(0, MAX_SEED) = 0
     """The first seed: confirmation runs start past the seeds a search saw (e.g. 100)."""
-    list: tuple[NonNegativeInt, ...] | None = None
+    list: Annotated[tuple[Int(0, MAX_SEED), ...], Field(max_length=MAX_SEEDS)] | None = None
     """The seeds themselves (instead of count and start); distinct."""
 
     @model_validator(mode="after")
@@ -71,7 +156,10 @@ class Seeds(BaseModel):
         if (self.count is None) == (self.list is None):
             raise ValueError("give count (and start) or list")
         if self.list is not None and (not self.list or len(set(self.list)) != len(self.list)):
-            raise ValueError(f"list {list(self.list)} must hold distinct seeds, at least one")
+            raise KeyedError(("list",), f"{excerpt(builtins.list(self.list))} must hold distinct seeds, at least one")
+        if self.count is not None and self.start + self.count - 1 > MAX_SEED:
+            raise KeyedError(("start",), f"seeds {self.start}..{self.start + self.count - 1} pass {MAX_SEED}; "
+                                         f"accepted: seeds up to {MAX_SEED}")
         return self
 
     def values(self) -> tuple[int, ...]:
@@ -98,20 +186,20 @@ class UserEnv(BaseModel):
     model_config = _schema_config()
     factory: str | None = Field(None, pattern=r"^[\w.]+:\w+$")
     """``"package.module:function"``: called as ``function(env_config)``, returns a gymnasium env."""
-    id: str | None = None
+    id: str | None = Field(None, min_length=1, max_length=200)
     """A registered gymnasium id (``gym.make(id)``), instead of ``factory``."""
-    cost_limit: float = Field(ge=0)
+    cost_limit: Real = Field(ge=0)
     """b, the limit on the episode cost (required: there is no sensible default)."""
-    episode_cost_discount: float = Field(1.0, gt=0, le=1)
+    episode_cost_discount: Real = Field(1.0, gt=0, le=1)
     """γ_C of the episode cost the multiplier reads: 1 sums the per-step costs (Safety-Gym's convention)."""
-    cost_key: str = "cost"
+    cost_key: str = Field("cost", min_length=1, max_length=100)
     """The key of ``info`` that holds the step's cost."""
     preset: Literal["mujoco", "safety_gym", "tiny"] = "mujoco"
     """Which family's preset the algorithms start from (docs/config.md): ``mujoco`` is the paper's
     Table 4 for continuous control, the general case."""
     kwargs: dict[str, Any] = {}
     """Passed to the factory (merged into its env config) or to ``gym.make``."""
-    name: str | None = Field(None, pattern=r"^[\w./-]+$")
+    name: Annotated[str, AfterValidator(_task_name)] | None = None
     """The task's name in the sweep, its runs and labels (default: ``user/<function or id>``)."""
 
     @model_validator(mode="after")
@@ -134,22 +222,22 @@ class Distribution(BaseModel):
     """One searched field's distribution: exactly one key."""
 
     model_config = _schema_config()
-    choice: tuple[Scalar, ...] | None = Field(None, min_length=1)
+    choice: tuple[Scalar, ...] | None = Field(None, min_length=1, max_length=MAX_VALUES)
     """One of these values (numbers, strings, booleans, null: Optuna's categorical)."""
-    uniform: tuple[float, float] | None = None
+    uniform: tuple[Real, Real] | None = None
     """[low, high]."""
-    loguniform: tuple[float, float] | None = None
+    loguniform: tuple[Real, Real] | None = None
     """[low, high], low > 0: uniform in log space."""
-    int: tuple[builtins.int, builtins.int] | None = None
+    int: tuple[Annotated[builtins.int, Field(strict=True)], Annotated[builtins.int, Field(strict=True)]] | None = None
     """[low, high]: an integer, both ends included."""
-    quniform: tuple[float, float, float] | None = None
+    quniform: tuple[Real, Real, Real] | None = None
     """[low, high, q]: uniform, rounded to a multiple of q (quantised)."""
 
     @field_validator("choice", mode="before")
     @classmethod
     def _scalars(cls, v):
         if isinstance(v, (list, tuple)) and any(isinstance(c, (list, tuple, dict)) for c in v):
-            raise ValueError(f"{list(v)}: choice values are numbers, strings, booleans or null (Optuna's "
+            raise ValueError(f"{excerpt(list(v))}: choice values are numbers, strings, booleans or null (Optuna's "
                              "categorical); accepted for lists such as layer sizes: a grid")
         return v
 
@@ -184,15 +272,19 @@ class Distribution(BaseModel):
 def _grid_lists(grid: dict) -> dict:
     for name, values in grid.items():
         if not values:
-            raise ValueError(f"{name}: an empty list of values; accepted: a non-empty list")
+            raise KeyedError((name,), "an empty list of values; accepted: a non-empty list")
     return grid
+
+
+#: A grid: field → its values (one configuration per combination; their count is bounded at plan time).
+Grid = dict[str, Annotated[tuple[Any, ...], Field(max_length=MAX_VALUES)]]
 
 
 class Group(BaseModel):
     """Named configurations: every combination of ``grid``'s values, each with ``set`` on top."""
 
     model_config = _schema_config()
-    grid: dict[str, tuple[Any, ...]] = {}
+    grid: Grid = {}
     """field → values: one configuration per combination (none: one configuration, ``set`` alone)."""
     set: dict[str, Any] = {}
     """Fields this group's configurations set (the sweep's ``set`` below them, ``grid`` above)."""
@@ -205,12 +297,14 @@ class GroupsAt(BaseModel):
     ablation runs a reduced Table 3 at the quick budget on the tiny task."""
 
     model_config = _schema_config()
-    budget: str | None = None
-    """The budget name this applies at (none: any)."""
+    budget: str | int | None = None
+    """The budget this applies at (``smoke | quick | paper`` or env steps; none: any)."""
     preset: Literal["mujoco", "safety_gym", "tiny"] | None = None
     """The task preset this applies to (none: any)."""
-    groups: dict[str, Group] = Field(min_length=1)
+    groups: dict[SafeName, Group] = Field(min_length=1)
     """The groups there."""
+
+    _budget = field_validator("budget", mode="before")(classmethod(lambda cls, v: _budget_value(v)))
 
 
 class SweepFile(BaseModel):
@@ -220,9 +314,9 @@ class SweepFile(BaseModel):
     the defaults shown here. Flags given on the command line win over the file."""
 
     model_config = _schema_config()
-    description: str | None = None
+    description: str | None = Field(None, max_length=MAX_TEXT)
     """What the sweep is for (shown in the plan and the parent run's note)."""
-    name: str | None = Field(None, pattern=r"^[\w.-]+$")
+    name: SafeName | None = None
     """The sweep's name: its Tune directory and MLflow parent run; ``--resume`` finds it by name
     (default: FILE-TASK-BUDGET)."""
     task: tuple[TaskRef, ...] | None = Field(None, min_length=1)
@@ -230,16 +324,17 @@ class SweepFile(BaseModel):
     list of them; default ``lac/PointHazard-v0``."""
     algo: tuple[str, ...] = ("lac",)
     """The algorithm (``lac | ppo_lag | sac_lag``) or a list (every configuration runs with each)."""
-    budget: str | PositiveInt | None = None
+    budget: str | int | None = None
     """Env steps per trial: a named budget (``smoke | quick | paper``, with the overrides that make
-    it meaningful: docs/sweeps.md) or a number of env steps (the presets' fields); default quick."""
+    it meaningful: docs/sweeps.md) or a number of env steps in [1, 10¹⁰] (the presets' fields);
+    default quick."""
     seeds: Seeds | None = None
     """A count (``3``), ``{count: 3, start: 100}``, or a list (``[100, 101, 102]``); default 3 from 0."""
     set: dict[str, Any] = {}
     """Fields every trial sets (as ``--set``; docs/config.md lists each algorithm's)."""
-    grid: dict[str, tuple[Any, ...]] | None = None
+    grid: Grid | None = None
     """field → values: one configuration per combination (the file's one group)."""
-    groups: dict[str, Group] | None = None
+    groups: dict[SafeName, Group] | None = None
     """Named groups of configurations, the sweep runs all of them (e.g. Table 3's NI, VT, PR)."""
     groups_at: tuple[GroupsAt, ...] = ()
     """Groups used instead of ``groups`` at a budget and task preset (the first match wins)."""
@@ -250,15 +345,15 @@ class SweepFile(BaseModel):
     sampler), ``tpe`` (Optuna's TPE on one objective with the feasibility constraint; the default with
     ``search``), or a multi-objective search on return and cost with the constraint, whose result is
     the Pareto set: ``motpe`` (Optuna's TPE on two objectives) or ``nsga2`` (NSGA-II)."""
-    num_samples: PositiveInt | None = None
+    num_samples: Int(1, MAX_SAMPLES) | None = None
     """Configurations a search samples (each trained with every seed); default 20."""
     scheduler: Literal["none", "asha"] | None = None
     """``asha`` stops poor trials early (Tune's ASHA on the objective); default none."""
-    max_concurrent: PositiveInt | None = None
+    max_concurrent: Int(1, MAX_CPUS) | None = None
     """Trials at once (default: CPUs / cpus_per_trial)."""
-    cpus_per_trial: PositiveInt | None = None
+    cpus_per_trial: Int(1, MAX_CPUS) | None = None
     """CPUs per trial: as many env runners sample and as many torch threads update; default 1."""
-    experiment: str | None = None
+    experiment: Annotated[str, AfterValidator(_display_name)] | None = None
     """The MLflow experiment (default ``lac-sweeps``)."""
 
     @field_validator("task", "algo", mode="before")
@@ -278,40 +373,38 @@ class SweepFile(BaseModel):
 
         bad = [a for a in v if a not in ALGOS]
         if bad or not v or len(set(v)) != len(v):
-            raise ValueError(f"{bad[0] if bad else list(v)!r}: accepted: {' | '.join(ALGOS)} "
+            raise ValueError(f"{excerpt(bad[0] if bad else list(v))}: accepted: {' | '.join(ALGOS)} "
                              "(or a list of distinct ones)")
         return v
 
-    @field_validator("budget")
-    @classmethod
-    def _budget(cls, v):
-        if isinstance(v, str) and v not in BUDGET_NAMES:
-            raise ValueError(f"unknown budget {v!r}; accepted: {' | '.join(BUDGET_NAMES)} or env steps (an integer)")
-        return v
+    _budget = field_validator("budget", mode="before")(classmethod(lambda cls, v: _budget_value(v)))
 
     _lists = field_validator("grid")(classmethod(lambda cls, v: v if v is None else _grid_lists(v)))
 
     @model_validator(mode="after")
     def _shape(self):
         if self.grid is not None and self.groups is not None:
-            raise ValueError("give grid or groups, not both (a grid is one group)")
+            raise KeyedError(("groups",), "give grid or groups, not both (a grid is one group)")
         if self.grid == {} or self.groups == {}:
-            raise ValueError("an empty grid; accepted: field → a non-empty list of values")
+            raise KeyedError(("grid" if self.grid == {} else "groups",),
+                             "an empty grid; accepted: field → a non-empty list of values")
         if self.search is not None:
             if self.grid is not None or self.groups is not None or self.groups_at:
-                raise ValueError("give search or grid/groups, not both")
+                raise KeyedError(("search",), "give search or grid/groups, not both")
             if self.searcher == "grid":
-                raise ValueError("searcher grid samples nothing: it runs grid/groups; "
-                                 "accepted with search: random | tpe | motpe | nsga2")
+                raise KeyedError(("searcher",), "searcher grid samples nothing: it runs grid/groups; "
+                                                "accepted with search: random | tpe | motpe | nsga2")
             if self.searcher in MULTI_OBJECTIVE and self.scheduler == "asha":
-                raise ValueError(f"scheduler asha with searcher {self.searcher}: Tune gives a multi-objective "
-                                 "search no intermediate results to stop trials by; accepted: scheduler none")
+                raise KeyedError(("scheduler",), f"scheduler asha with searcher {self.searcher}: Tune gives a "
+                                 "multi-objective search no intermediate results to stop trials by; "
+                                 "accepted: scheduler none")
             if self.task is not None and len(self.task) > 1:
-                raise ValueError("a search optimises one task; run one sweep per task")
+                raise KeyedError(("task",), "a search optimises one task; run one sweep per task")
             if len(self.algo) > 1:
-                raise ValueError("a search runs one algorithm; search over it instead: search: {algo: {choice: [...]}}")
+                raise KeyedError(("algo",), "a search runs one algorithm; search over it instead: "
+                                            "search: {algo: {choice: [...]}}")
         elif self.searcher in ("random", "tpe", *MULTI_OBJECTIVE):
-            raise ValueError(f"searcher {self.searcher} needs a search section (field → distribution)")
+            raise KeyedError(("searcher",), f"searcher {self.searcher} needs a search section (field → distribution)")
         return self
 
     @property
@@ -356,47 +449,81 @@ def builtin_spaces() -> tuple[str, ...]:
 
 def load(path: str | Path, text: str | None = None) -> SweepFile:
     """The sweep file at ``path``, checked (both passes); a SweepFileError says what is wrong, where."""
+    return load_with_origin(path, text)[0]
+
+
+def load_with_origin(path: str | Path, text: str | None = None) -> tuple[SweepFile, Origin]:
+    """The checked sweep file and where each of its keys is (:class:`Origin`: ``FILE:LINE``)."""
     path = Path(path)
-    if text is None:
-        try:
-            text = path.read_text()
-        except OSError as e:
-            raise SweepFileError(f"{path}: cannot be read ({e.strerror})") from None
     try:
-        node = yaml.compose(text, Loader=_Loader)
-        data = yaml.load(text, Loader=_Loader)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise SweepFileError(f"{where}: not valid YAML: {getattr(e, 'problem', None) or e}") from None
-    if data is None:
-        data = {}
+        data, node = read_yaml(read_yaml_text(path) if text is None else text, _Loader)
+    except YamlRefused as e:
+        raise SweepFileError(f"{path}{f':{e.line}' if e.line else ''}: {e.message}") from None
+    if data is None or data == {}:
+        raise SweepFileError(f"{path}: no keys (an empty file); accepted: a mapping of keys (task, algo, grid, ...: "
+                             "docs/sweeps.md), e.g. 'task: lac/PointHazard-v0'")
     if not isinstance(data, dict):
         raise SweepFileError(f"{path}: a sweep file is a mapping of keys (task, algo, grid, ...), not a "
                              f"{type(data).__name__}")
+    origin = Origin(path, node)
     try:
         sweep = SweepFile.model_validate(data)
     except ValidationError as e:
-        raise SweepFileError(_first_error(e, path, node)) from None
+        raise SweepFileError(first_error(e, origin)) from None
     try:
         check_fields(sweep)
     except FieldError as e:
-        raise SweepFileError(f"{_where(path, node, e.loc)}: {_dotted(e.loc)}: {e.message}") from None
-    return sweep
+        raise SweepFileError(f"{origin(e.loc)}: {e.message}") from None
+    return sweep, origin
 
 
-def _first_error(e: ValidationError, path: Path, node) -> str:
-    err = e.errors()[0]
-    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith(("<", "function-"))))
+class Origin:
+    """Where a key of a sweep came from, as the first words of an error line about it: the flag
+    that set it (``flags``: key path → ``--cpus-per-trial``), else ``FILE:LINE: key.path`` (the
+    line of the deepest part of the path the file has), else ``SOURCE: key.path``."""
+
+    def __init__(self, path: Path | None = None, node=None, flags: dict | None = None, source: str = "the sweep"):
+        self.path, self.node, self.flags, self.source = path, node, dict(flags or {}), source
+
+    def with_flags(self, flags: dict) -> Origin:
+        return Origin(self.path, self.node, {**self.flags, **flags}, self.source)
+
+    def flag(self, loc: tuple) -> str | None:
+        """The flag that set ``loc`` (or a key above it), if one did."""
+        return next((self.flags[loc[:n]] for n in range(len(loc), 0, -1) if loc[:n] in self.flags), None)
+
+    def __call__(self, loc: tuple) -> str:
+        loc = tuple(loc)
+        flag = self.flag(loc)
+        if flag:
+            return flag
+        where = _where(self.path, self.node, loc) if self.path else self.source
+        return f"{where}: {_dotted(loc)}" if loc else where
+
+
+def first_error(e: ValidationError, origin: Origin) -> str:
+    """The first of pydantic's errors as one line: where, the key, what is wrong, the value (cut)
+    and what is accepted."""
+    errors = e.errors()  # an unknown key first: a typo also explains the required key it misses
+    err = next((x for x in errors if x["type"] == "extra_forbidden"), errors[0])
+    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith(("<", "function-"))
+                                              or p == "[key]"))
+    cause = (err.get("ctx") or {}).get("error")
+    if isinstance(cause, KeyedError):
+        loc = (*loc, *cause.loc)
     if err["type"] == "extra_forbidden":
         parent = _model_at(loc[:-1])
         accepted = list(parent.model_fields) if parent else []
         close = difflib.get_close_matches(str(loc[-1]), accepted, n=1)
         hint = f" (did you mean {close[0]}?)" if close else ""
-        msg = f"unknown key {loc[-1]!r}{hint}; accepted: {', '.join(accepted)}"
-    else:
-        msg = err["msg"].removeprefix("Value error, ")
-    return f"{_where(path, node, loc)}: {_dotted(loc) or '(top level)'}: {msg}"
+        msg = f"unknown key {excerpt(loc[-1])}{hint}; accepted: {', '.join(accepted)}"
+    elif err["type"] in ("value_error", "assertion_error"):
+        msg = err["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    else:  # pydantic's own words say what is accepted; the value is repeated, cut
+        got = err.get("input")
+        shown = "" if isinstance(got, dict) else f" (got {excerpt(got)})"
+        msg = f"{err['msg']}{shown}"
+    return f"{origin(loc)}: {msg}"
 
 
 def _model_at(loc: tuple) -> type[BaseModel] | None:
@@ -533,10 +660,11 @@ def _check_field(name: str, value: Any, algos: tuple, loc: tuple) -> None:
                 raise FieldError(loc[:loc.index(name) + 1],
                                  f"a field of {' and '.join(owners)}, not of {algo} (which this trial runs); "
                                  f"fields of {algo}: docs/config.md")
-            close = difflib.get_close_matches(name, sorted(fields.names), n=1)
+            close = difflib.get_close_matches(name, sorted(fields.names), n=3)
+            hint = f" (did you mean {close[0]}?)" if close else ""
             raise FieldError(loc[:loc.index(name) + 1],
-                             f"unknown {algo} field {name!r}{f' (did you mean {close[0]}?)' if close else ''}; "
-                             f"accepted: the fields of docs/config.md ({', '.join(sorted(fields.names))})")
+                             f"unknown {algo} field {excerpt(name)}{hint}; accepted: the {len(fields.names)} fields "
+                             f"of {algo} in docs/config.md{f' (closest: {chr(44).join(close)})' if close else ''}")
         try:
             fields.check(name, to_field_value(value))
         except ValueError as e:
@@ -568,16 +696,26 @@ def _type_text(t: Any) -> str:
     import types
     import typing
 
-    import annotated_types
 
     origin, args = typing.get_origin(t), typing.get_args(t)
     if origin is Annotated:
         base = _type_text(args[0])
-        for meta in args[1:]:
-            for cls, op in ((annotated_types.Gt, ">"), (annotated_types.Ge, ">=")):
-                if isinstance(meta, cls):
-                    base += f" {op} {getattr(meta, cls.__name__.lower())}"
-        return base
+        metas = [m for meta in args[1:] for m in (getattr(meta, "metadata", None) or [meta])]
+        found = {type(m).__name__: m for m in metas}
+
+        def bound(name: str) -> str | None:
+            v = getattr(found[name], "max_length" if name == "MaxLen" else name.lower()) if name in found else None
+            return None if v is None else f"{v:,}" if isinstance(v, int) else str(v)
+
+        low = ("[", bound("Ge")) if "Ge" in found else ("(", bound("Gt")) if "Gt" in found else None
+        high = ("]", bound("Le")) if "Le" in found else (")", bound("Lt")) if "Lt" in found else None
+        most = f" (at most {bound('MaxLen')})" if "MaxLen" in found else ""
+        if low and high:
+            return f"{base} in {low[0]}{low[1]}, {high[1]}{high[0]}{most}"
+        if low or high:
+            op = {"[": ">=", "(": ">", "]": "<=", ")": "<"}[(low or high)[0]]
+            return f"{base} {op} {(low or high)[1]}{most}"
+        return base + most
     if origin in (typing.Union, types.UnionType):
         return " | ".join(_type_text(a) for a in args if a is not type(None))
     if origin is Literal:

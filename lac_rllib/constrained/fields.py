@@ -11,6 +11,7 @@ import ast
 import dataclasses
 import inspect
 import math
+import reprlib
 from typing import Any, Callable
 
 
@@ -77,7 +78,18 @@ def check_value(ranges: dict[str, Accepted], name: str, value: Any, *, what: str
     """Raise a ValueError naming the field, the value and the accepted values if ``value`` is bad."""
     accepted = ranges.get(name)
     if accepted is not None and not accepted.test(value):
-        raise ValueError(f"{what} config field {name}={value!r} is invalid; accepted: {accepted.text}")
+        raise ValueError(f"{what} config field {name}={excerpt(value)} is invalid; accepted: {accepted.text}")
+
+
+def excerpt(value: Any, limit: int = 60) -> str:
+    """A bad value as an error line quotes it: a short, cut ``repr`` (a value from a sweep file may
+    be huge: never the whole of it)."""
+    text = _REPR.repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+_REPR = reprlib.Repr()  # Python 3.11's takes no keywords
+_REPR.maxstring, _REPR.maxother, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxlevel = 40, 40, 4, 4, 3, 2
 
 
 def parse_sets(pairs: list[str], names, *, what: str) -> dict:

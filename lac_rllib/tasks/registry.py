@@ -77,14 +77,19 @@ def known_tasks() -> list[str]:
 
 
 def get_task(task_id: str) -> TaskSpec:
-    """Look a task up; an unknown id raises ``ValueError`` listing the known ones."""
+    """Look a task up; an unknown id raises ``ValueError`` naming the closest known ones (a few:
+    the full list is docs/tasks.md, ``known_tasks()``)."""
     _load_builtin()
     try:
         return _TASKS[task_id]
-    except KeyError:
-        raise ValueError(
-            f"unknown task {task_id!r}; known tasks: {', '.join(sorted(_TASKS))}"
-        ) from None
+    except (KeyError, TypeError):
+        import difflib
+
+        from lac_rllib.constrained.fields import excerpt
+
+        close = difflib.get_close_matches(str(task_id), sorted(_TASKS), n=3, cutoff=0.0)
+        raise ValueError(f"unknown task {excerpt(task_id)}; closest known tasks: {', '.join(close)} "
+                         f"(all {len(_TASKS)}: docs/tasks.md)") from None
 
 
 def _load_builtin() -> None:

@@ -16,6 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from lac_rllib.constrained.fields import excerpt
 from lac_rllib.tasks.registry import TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.user:make_env"
@@ -96,22 +97,44 @@ def make_env(env_config: dict | None = None) -> gym.Env:
 
 def check_env(env: gym.Env, cost_key: str, what: str, steps: int = 5) -> tuple[int, int]:
     """(obs_dim, act_dim) of an env the algorithms can train on, or a ValueError saying why not:
-    spaces that are not flat Boxes, or a step whose info holds no cost."""
+    not a gymnasium env, spaces that are not flat Boxes, a reset or step that raises or returns
+    something else than gymnasium's tuples, or a step whose info holds no cost."""
+    if not isinstance(env, gym.Env):
+        raise ValueError(f"{what}: the factory returned {excerpt(env)} (a {type(env).__name__}); "
+                         "accepted: a gymnasium.Env")
     for kind, space in (("observation", env.observation_space), ("action", env.action_space)):
         if not (isinstance(space, gym.spaces.Box) and len(space.shape) == 1):
-            raise ValueError(f"{what}: its {kind} space is {space}; accepted: a flat Box (1-D gymnasium.spaces.Box)")
-    env.reset(seed=0)
+            raise ValueError(f"{what}: its {kind} space is {excerpt(space, 120)}; accepted: a flat Box "
+                             "(1-D gymnasium.spaces.Box)")
+    _returns(what, "reset(seed=0)", _call(what, "reset(seed=0)", env.reset, seed=0), 2, "(obs, info)")
     env.action_space.seed(0)
     for _ in range(steps):
-        _, _, terminated, truncated, info = env.step(env.action_space.sample())
-        if cost_key not in info:
-            raise ValueError(f"{what}: its step info has no {cost_key!r} (keys: {sorted(info) or 'none'}); "
+        out = _call(what, "step(action)", env.step, env.action_space.sample())
+        _, _, terminated, truncated, info = _returns(what, "step(action)", out, 5,
+                                                     "(obs, reward, terminated, truncated, info)")
+        if not isinstance(info, dict) or cost_key not in info:
+            keys = sorted(map(str, info)) if isinstance(info, dict) else f"not a dict: {excerpt(info)}"
+            raise ValueError(f"{what}: its step info has no {cost_key!r} (keys: {keys or 'none'}); "
                              f"accepted: an env that reports the step's cost in info[{cost_key!r}] (or name the key: "
                              "cost_key)")
-        float(info[cost_key])
+        _call(what, f"float(info[{cost_key!r}])", float, info[cost_key])
         if terminated or truncated:
-            env.reset()
+            _call(what, "reset()", env.reset)
     return int(env.observation_space.shape[0]), int(env.action_space.shape[0])
+
+
+def _call(what: str, call: str, fn, *args, **kwargs):
+    """``fn(*args)``, with anything the user's code raises as one ValueError naming the env and the call."""
+    try:
+        return fn(*args, **kwargs)
+    except Exception as e:  # the user's own code: any exception, said in one line
+        raise ValueError(f"{what}: {call} raised {type(e).__name__}: {excerpt(str(e), 160)[1:-1]}") from None
+
+
+def _returns(what: str, call: str, out, n: int, shape: str):
+    if not (isinstance(out, tuple) and len(out) == n):
+        raise ValueError(f"{what}: {call} returned {excerpt(out)}; accepted: gymnasium's {shape}")
+    return out
 
 
 def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = None, cost_limit: float,
@@ -127,11 +150,17 @@ def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = 
     try:
         inner = _inner(env_kwargs)
     except Exception as e:  # an import error, a bad id, the user's own exception: say which env
-        raise ValueError(f"task {source}: cannot be built ({type(e).__name__}: {e})") from None
+        raise ValueError(f"task {source}: cannot be built ({type(e).__name__}: {excerpt(str(e), 160)[1:-1]})") from None
     try:
         obs_dim, act_dim = check_env(inner, cost_key, f"task {source}")
-    finally:
-        inner.close()
+    except ValueError:
+        if isinstance(inner, gym.Env):
+            try:
+                inner.close()
+            except Exception:  # noqa: S110 (the check's error is the one to report)
+                pass
+        raise
+    _call(f"task {source}", "close()", inner.close)
     return register(TaskSpec(
         id=task_id, factory=FACTORY, cost_limit=float(cost_limit), episode_cost_discount=float(episode_cost_discount),
         preset=preset, obs_dim=obs_dim, act_dim=act_dim, cost_source=f"info[{cost_key!r}] of {source}",

@@ -279,7 +279,7 @@ def test_a_fresh_search_does_not_adopt_an_existing_study(tmp_path):
 
 @pytest.mark.parametrize("extra,needle", [
     (["--space", "nope"], "invalid choice: 'nope'"),
-    (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
+    (["--task", "Nope-v0"], "unknown task 'Nope-v0'; closest known tasks:"),
     (["--budget", "huge"], "argument --budget: 'huge' is invalid; accepted: smoke | quick | paper or env steps"),
     (["--seeds", "0"], "argument --seeds: 0 is invalid; accepted: an integer >= 1"),
     (["--tracking-uri", "http://127.0.0.1:9"], "--tracking-uri http://127.0.0.1:9 is unreachable"),

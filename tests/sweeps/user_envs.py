@@ -42,3 +42,40 @@ def make_costless(config):
 
 def make_dict_obs(config):
     return _Line(dict_obs=True)
+
+
+def make_int(config):
+    """A factory that returns no env at all."""
+    return 42
+
+
+class _Raises(_Line):
+    def __init__(self, where: str):
+        super().__init__()
+        self.where = where
+
+    def reset(self, *, seed=None, options=None):
+        if self.where == "reset":
+            raise RuntimeError("the simulator could not load its scene")
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action):
+        if self.where == "step":
+            raise RuntimeError("physics diverged at step 1")
+        return super().step(action)
+
+    def close(self):
+        if self.where == "close":
+            raise OSError("the viewer was already gone")
+
+
+def make_step_raises(config):
+    return _Raises("step")
+
+
+def make_reset_raises(config):
+    return _Raises("reset")
+
+
+def make_close_raises(config):
+    return _Raises("close")

@@ -38,9 +38,11 @@ def test_bad_values_name_field_and_accepted_range(field, value, accepted):
     assert field in str(err.value) and accepted in str(err.value) and repr(value) in str(err.value)
 
 
-def test_unknown_task_lists_known_ones():
-    with pytest.raises(ValueError, match="unknown task 'Nope-v0'; known tasks: .*lac/PointHazard-v0"):
-        LACConfig().task("Nope-v0")
+def test_unknown_task_names_the_closest_known_ones_not_all():
+    with pytest.raises(ValueError, match=r"unknown task 'SafetyPointGoal9-v0'; closest known tasks: "
+                                         r"SafetyPointGoal\d-v0, .*\(all \d+: docs/tasks.md\)") as err:
+        LACConfig().task("SafetyPointGoal9-v0")
+    assert str(err.value).count(",") == 2  # three, not the whole registry
 
 
 def test_spec_defaults_and_presets():
@@ -103,7 +105,7 @@ def test_task_convention_feeds_cost_limit_and_discount():
     (["--set", "temperature=-1"], "temperature=-1 is invalid"),
     (["--set", "beta=-1"], "beta=-1 is invalid"),
     (["--set", "nosuch=1"], "unknown LAC config field 'nosuch'; accepted:"),
-    (["--task", "Nope-v0"], "unknown task 'Nope-v0'; known tasks:"),
+    (["--task", "Nope-v0"], "unknown task 'Nope-v0'; closest known tasks:"),
     (["--timesteps", "0"], "--timesteps 0 is invalid"),
     (["--output", "/proc/x/out"], "--output /proc/x/out cannot be created"),
     (["--checkpoint-every", "-1"], "--checkpoint-every -1 is invalid"),
