@@ -11,7 +11,7 @@ default, two for ``lac-train --cpus 2``'s two env runners and learner threads), 
 ``NAME:field=value,...`` on top of the defaults and ``--set`` (``algo=ppo_lag`` or ``algo=sac_lag``
 among them trains that baseline). Every run writes ``runs/<variant>/seed<k>/progress.jsonl``
 one line per iteration and a checkpoint every ``--checkpoint-every`` iterations, and the report is rebuilt every
-``--report-every`` seconds while runs go, so a run stopped mid-way (session end, Ctrl-C) leaves
+``--report-every`` seconds while runs go, so a run stopped mid-way (the machine gone, Ctrl-C) leaves
 curves up to its last iteration; ``--resume`` continues such runs from their checkpoints (the same
 command plus ``--resume``) and ``--report-only`` rebuilds the report from what is on disk. The
 report (in ``--out``):
@@ -23,6 +23,13 @@ report (in ``--out``):
   over seeds, beside the paper's number for the task (docs/spec.md §7, docs/fidelity/README.md) and,
   for Safety-Gymnasium PointGoal1, OmniSafe's published SACLag/PPOLag. Runs are compared at
   equal budget: every curve is cut at the smallest env-step count all runs reached.
+
+The commands a report shows (each run's ``command.txt`` and table.md's "Commands:" block) name the
+run directory with the run root as a placeholder, ``RUN_DIR/<out dir name>/runs/<variant>/seed<k>``:
+``RUN_DIR`` stands for the parent of ``--out``, so ``--out /data/fidelity-runs/pointgoal1`` writes
+``--output RUN_DIR/pointgoal1/runs/new/seed0`` and no machine's paths reach the docs. The runs
+themselves get the real path. Commands of included earlier reports (``--include-curves``) whose
+``--output`` is an old absolute path are written the same way.
 """
 
 from __future__ import annotations
@@ -89,6 +96,26 @@ def run_dir(out: Path, variant: str, seed: int) -> Path:
     return out / "runs" / variant / f"seed{seed}"
 
 
+RUN_ROOT = "RUN_DIR"  # the parent of --out, as the written commands name it
+
+
+def portable_output(path: str) -> str:
+    """A run directory as the written commands name it: ``/any/root/NAME/runs/V/seedK`` (or a
+    relative path that resolves to it) → ``RUN_DIR/NAME/runs/V/seedK``; already so: unchanged."""
+    if path == RUN_ROOT or path.startswith(RUN_ROOT + "/"):
+        return path
+    return "/".join((RUN_ROOT, *Path(os.path.abspath(path)).parts[-4:]))  # NAME, runs, V, seedK
+
+
+def portable_command(line: str) -> str:
+    """``line`` (a lac-train command) with its ``--output`` directory written by :func:`portable_output`."""
+    words = line.split()
+    for i, word in enumerate(words[:-1]):
+        if word == "--output":
+            words[i + 1] = portable_output(words[i + 1])
+    return " ".join(words)
+
+
 def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int,
            resume: bool = False, checkpoint_every: int = 2, cpus: int = 1):
     from lac_rllib.train import resumable_checkpoint
@@ -109,7 +136,7 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
             (d / name).unlink(missing_ok=True)  # a fresh run, not mixed with an old one
     for p in pairs:
         cmd += ["--set", p]
-    (d / "command.txt").write_text(" ".join(["lac-train", *cmd[3:]]).replace(" --resume", "") + "\n")
+    (d / "command.txt").write_text(portable_command(" ".join(["lac-train", *cmd[3:]]).replace(" --resume", "")) + "\n")
     log = open(d / "train.log", "a" if "--resume" in cmd else "w")
     # One OpenMP thread for every process of the run: its env runners inherit this, and two runners
     # of two threads each oversubscribe two cores (half the time in the kernel); the learner sets its
@@ -133,7 +160,7 @@ def lower_priority(proc, nice: int) -> None:
 
 def load_curves(out: Path, include: list[Path] = ()):
     """Every iteration of the runs under ``out/runs``, then the rows of each ``include``d curves.csv
-    (an earlier report's, e.g. of runs whose directories a later session no longer has) for the
+    (an earlier report's, e.g. of runs whose directories are gone) for the
     (variant, seed) pairs not on disk: a run on disk wins over its committed curve."""
     import pandas as pd
 
@@ -160,14 +187,14 @@ def load_curves(out: Path, include: list[Path] = ()):
 def earlier_commands(include: list[Path], runs: list[tuple[str, int]]) -> list[str]:
     """The commands of ``runs`` (variant, seed) as the earlier reports beside the included
     curves.csv files wrote them (their table.md's command block: the line whose output ends in
-    runs/<variant>/seed<k>)."""
+    runs/<variant>/seed<k>), their run directories written as :func:`portable_output` writes them."""
     wanted = tuple(f"/runs/{v}/seed{s}" for v, s in runs)
     found = []
     for csv in include:
         table = Path(csv).with_name("table.md")
         for line in table.read_text().splitlines() if table.exists() else []:
             if "--output" in line and line.split("--output", 1)[1].split()[0].endswith(wanted):
-                found.append(line.strip())
+                found.append(portable_command(line.strip()))
     return list(dict.fromkeys(found))
 
 
@@ -258,7 +285,7 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
     df.to_csv(out / "curves.csv", index=False)
     plot(df, task, order, out / "curves.png")
     table, common = final_table(df, task, order, compare_at)
-    commands = sorted(p.read_text().strip() for p in out.glob("runs/*/seed*/command.txt"))
+    commands = sorted(portable_command(p.read_text().strip()) for p in out.glob("runs/*/seed*/command.txt"))
     reached = df.groupby(["variant", "seed"]).agg(steps=("env_steps", "max"), hours=("time_s", "max"))
     budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
                        for (v, s), r in reached.iterrows())
@@ -299,7 +326,7 @@ def main(argv=None) -> int:
                              "runs short of it are listed, not scored")
     parser.add_argument("--include-curves", action="append", default=[], metavar="CSV", type=Path,
                         help="an earlier report's curves.csv: its runs that are not on disk join the report "
-                             "(a later session's machine no longer has their directories)")
+                             "(their run directories are gone)")
     parser.add_argument("--resume", action="store_true",
                         help="continue runs from their latest checkpoint (lac-train --resume); "
                              "runs at the budget are skipped")

@@ -1,9 +1,12 @@
 """benchmarks/fidelity.py's report inputs: runs on disk, and earlier reports' curves whose run
-directories a later session no longer has (``--include-curves``)."""
+directories are gone (``--include-curves``); the commands it writes name no machine's paths."""
 
 import importlib.util
 import json
+import re
+import subprocess
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -18,9 +21,13 @@ def fidelity():
     return module
 
 
+# An absolute path in a command: a word (or a --set value) that starts with "/" or a drive letter.
+ABSOLUTE = re.compile(r"(?:^|[\s=])(?:/|[A-Za-z]:[\\/])\S*")
+
+
 def _write_run(out: Path, variant: str, seed: int, returns: list[float]) -> None:
     run = out / "runs" / variant / f"seed{seed}"
-    run.mkdir(parents=True)
+    run.mkdir(parents=True, exist_ok=True)
     lines = [json.dumps({"iteration": i + 1, "env_steps": 1000.0 * (i + 1), "episode_return": r, "episode_cost": 1.0,
                          "cost_limit": 25.0, "nu": 0.1, "time_s": 10.0 * (i + 1)}) for i, r in enumerate(returns)]
     (run / "progress.jsonl").write_text("\n".join(lines) + "\n")
@@ -46,8 +53,11 @@ def test_included_curves_add_the_runs_not_on_disk_and_disk_wins(fidelity, tmp_pa
     text = fidelity.report(now, "lac/PointHazard-v0", ["ppo_lag"], None, include=[earlier / "curves.csv"])
     assert "their run directories gone: ppo_lag seed 0." in text
     commands = text.split("Commands:")[1]
-    assert "/gone/runs/ppo_lag/seed0" in commands and "/now/runs/ppo_lag/seed1" in commands
+    # the old absolute paths, rewritten with the run root as the placeholder
+    assert "--output RUN_DIR/gone/runs/ppo_lag/seed0" in commands
+    assert "--output RUN_DIR/now/runs/ppo_lag/seed1" in commands
     assert "/gone/runs/ppo_lag/seed1" not in commands  # the run on disk replaced it
+    assert not ABSOLUTE.findall(commands), commands
     assert "Compared at 3,000 env steps" in text  # seed 0's 3k is the fewest reached
 
 
@@ -56,3 +66,41 @@ def test_a_file_that_is_not_a_curves_csv_is_refused(fidelity, tmp_path):
     bad.write_text("a,b\n1,2\n")
     with pytest.raises(ValueError, match="not a curves.csv"):
         fidelity.load_curves(tmp_path, [bad])
+
+
+def test_written_commands_name_the_run_root_as_a_placeholder(fidelity, tmp_path, monkeypatch):
+    """command.txt and the table's commands say RUN_DIR/<out name>/runs/<variant>/seed<k>; the run
+    itself is started with the real directory."""
+    started = []
+
+    def popen(cmd, **kwargs):
+        kwargs["stdout"].close()
+        started.append(cmd)
+        return SimpleNamespace(pid=0)
+
+    monkeypatch.setattr(fidelity, "subprocess", SimpleNamespace(Popen=popen, STDOUT=subprocess.STDOUT))  # no run
+    out = tmp_path / "fidelity-runs" / "pointhazard"
+    fidelity.launch(out, "lac/PointHazard-v0", "ppo_lag", ["algo=ppo_lag", "lagrangian_lr=0.0"], 1, 2000)
+    run = out / "runs" / "ppo_lag" / "seed1"
+    assert started[0][started[0].index("--output") + 1] == str(run)  # the run gets the real path
+    written = (run / "command.txt").read_text()
+    assert written == ("lac-train --task lac/PointHazard-v0 --seed 1 --timesteps 2000 --output "
+                       "RUN_DIR/pointhazard/runs/ppo_lag/seed1 --checkpoint-every 2 --algo ppo_lag "
+                       "--set lagrangian_lr=0.0\n")
+    assert not ABSOLUTE.findall(written) and str(tmp_path) not in written
+
+    _write_run(out, "ppo_lag", 1, [1.0, 2.0])
+    commands = fidelity.report(out, "lac/PointHazard-v0", ["ppo_lag"], 2000).split("Commands:")[1]
+    assert "--output RUN_DIR/pointhazard/runs/ppo_lag/seed1" in commands
+    assert not ABSOLUTE.findall(commands) and str(tmp_path) not in commands
+
+
+@pytest.mark.parametrize("path, written", [
+    ("/work/fidelity-runs/pointgoal1-campaign/runs/defaults/seed0", "RUN_DIR/pointgoal1-campaign/runs/defaults/seed0"),
+    ("/root/x/runs/bf16/seed1", "RUN_DIR/x/runs/bf16/seed1"),
+    ("RUN_DIR/pointgoal1/runs/new/seed0", "RUN_DIR/pointgoal1/runs/new/seed0"),  # already so
+])
+def test_portable_output(fidelity, path, written):
+    assert fidelity.portable_output(path) == written
+    assert fidelity.portable_command(f"lac-train --seed 0 --output {path} --checkpoint-every 2") == (
+        f"lac-train --seed 0 --output {written} --checkpoint-every 2")
