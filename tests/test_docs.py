@@ -4,7 +4,8 @@
 - every ``docs/spec.md §N`` citation names a section that exists, and every
   ``docs/spec.md, "Name"`` / ``docs/dependencies.md, "Name"`` citation a heading that exists;
 - nothing points outside the repository any more (the specification and the dependency notes
-  used to live in a sibling folder).
+  used to live in a sibling folder);
+- docs/architecture.md names only paths that exist, and every module of lac_rllib/ and sweeps/.
 """
 
 from __future__ import annotations
@@ -131,3 +132,70 @@ def test_every_repository_path_named_exists():
                 if not (ROOT / target).exists() and "*" not in target and "<" not in target:
                     bad.append(f"{rel(path)}:{n}: {target}")
     assert not bad, "paths that do not exist:\n" + "\n".join(bad)
+
+
+# docs/architecture.md's folder tree: a line is its indentation (two spaces a level), one name or a
+# few ("plan.py, record.py, lock.py"; a folder ends in "/") and what they hold.
+ARCHITECTURE = DOCS / "architecture.md"
+TREE_LINE = re.compile(r"^( *)((?:[\w.-]+/?, )*[\w.-]+/?)(?:\s+\S.*)?$")
+PACKAGES = ("lac_rllib", "sweeps")
+# What the page names in backticks: `lac_rllib/constrained/cpus.py`, `tasks/`, `lac_rllib.constrained`.
+BACKTICKED = re.compile(r"`([^`\s]+)`")
+TOP_FOLDERS = ("lac_rllib/", "sweeps/", "tests/", "benchmarks/", "docs/", "docker/")
+MODULE_NAME = re.compile(r"^(?:lac_rllib|sweeps)(?:\.\w+)*(?:\.\*)?$")
+
+
+def architecture_tree() -> list[str]:
+    """Every path the folder tree of docs/architecture.md names (folders without their "/")."""
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    block = text.split("## The folders", 1)[1].split("```", 2)[1]
+    folders: list[str] = []  # the folders above the current line
+    paths = []
+    for n, line in enumerate(block.splitlines(), 1):
+        if not line.strip():
+            continue
+        m = TREE_LINE.match(line)
+        assert m, f"docs/architecture.md, folder tree line {n} is not 'NAME[, NAME...]  what': {line!r}"
+        depth = len(m.group(1)) // 2
+        assert depth <= len(folders), f"docs/architecture.md, folder tree line {n} is under no folder: {line!r}"
+        del folders[depth:]
+        names = m.group(2).split(", ")
+        paths += ["/".join([*folders, name.rstrip("/")]) for name in names]
+        if len(names) == 1 and names[0].endswith("/"):
+            folders.append(names[0].rstrip("/"))
+    return paths
+
+
+def test_architecture_names_only_paths_that_exist():
+    """Every path of the folder tree, every repository path and module named in backticks, and every
+    file named bare (`langevin.py`, `tasks/`) is in the repository."""
+    tree = architecture_tree()
+    bad = [f"folder tree: {p}" for p in tree if not (ROOT / p).exists()]
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    for m in BACKTICKED.finditer(text):
+        name, line = m.group(1), text.count("\n", 0, m.start()) + 1
+        if name.startswith(TOP_FOLDERS):
+            exists = (ROOT / name.split("::")[0]).exists()
+        elif MODULE_NAME.match(name):
+            path = ROOT / name.removesuffix(".*").replace(".", "/")
+            exists = path.is_dir() or path.with_suffix(".py").exists()
+        elif name.endswith((".py", "/")):
+            exists = any(p == name.rstrip("/") or p.endswith("/" + name.rstrip("/")) for p in tree)
+        else:
+            continue
+        if not exists:
+            bad.append(f"line {line}: `{name}`")
+    for n, line in enumerate(text.splitlines(), 1):
+        bad += [f"line {n}: {m.group(1)}" for m in REPO_PATH.finditer(line)
+                if not (ROOT / m.group(1).split("::")[0].rstrip(".")).exists() and "<" not in m.group(1)]
+    assert not bad, "docs/architecture.md names paths that do not exist:\n" + "\n".join(bad)
+
+
+def test_architecture_names_every_module():
+    """Every module of lac_rllib/ and sweeps/ is a line of the folder tree (an __init__.py may be
+    named by its folder), so a new module comes with its line."""
+    tree = set(architecture_tree())
+    modules = sorted(rel(p) for d in PACKAGES for p in (ROOT / d).rglob("*.py") if "__pycache__" not in p.parts)
+    missing = [m for m in modules if m not in tree and not (m.endswith("/__init__.py") and m.rsplit("/", 1)[0] in tree)]
+    assert not missing, ("docs/architecture.md's folder tree does not name these modules (add a line each, "
+                         "under its folder):\n" + "\n".join(missing))
