@@ -5,7 +5,8 @@
   ``docs/spec.md, "Name"`` / ``docs/dependencies.md, "Name"`` citation a heading that exists;
 - nothing points outside the repository any more (the specification and the dependency notes
   used to live in a sibling folder);
-- docs/architecture.md names only paths that exist, and every module of lac_rllib/ and sweeps/.
+- docs/architecture.md names only paths that exist, and every module of lac_rllib/ and sweeps/;
+- no file under docs/ nor README.md holds a machine's absolute paths (run roots are RUN_DIR/...).
 """
 
 from __future__ import annotations
@@ -199,3 +200,25 @@ def test_architecture_names_every_module():
     missing = [m for m in modules if m not in tree and not (m.endswith("/__init__.py") and m.rsplit("/", 1)[0] in tree)]
     assert not missing, ("docs/architecture.md's folder tree does not name these modules (add a line each, "
                          "under its folder):\n" + "\n".join(missing))
+
+
+# A machine's absolute path, e.g. /work/fidelity-runs/pointgoal1-campaign/runs/defaults/seed0 or
+# sqlite:////root/sweep/mlflow.db: not after a word character, "." or "-", so a repository path
+# (docs/fidelity/...) or a URL's path (github.com/home/...) does not count.
+ABSOLUTE_RUN_PATH = re.compile(r"(?<![\w.-])/(?:work|root|home|tmp|Users|mnt|scratch|data)/[\w.-]+")
+
+
+def text_files(folder: Path) -> list[Path]:
+    """The text files under ``folder`` (images and other binaries left out)."""
+    return [p for p in sorted(folder.rglob("*")) if p.is_file() and b"\0" not in p.read_bytes()]
+
+
+def test_no_machine_paths_in_the_docs():
+    """Run directories and stores are written with the run root as a placeholder (RUN_DIR/...), so the
+    docs hold no machine's paths: every file under docs/ and README.md."""
+    bad = []
+    for path in [*text_files(DOCS), ROOT / "README.md"]:
+        for n, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+            bad += [f"{rel(path)}:{n}: {m.group(0)}" for m in ABSOLUTE_RUN_PATH.finditer(line)]
+    assert not bad, ("absolute paths of a machine in the docs (write the run root as RUN_DIR, e.g. "
+                     "RUN_DIR/pointgoal1-campaign/runs/defaults/seed0):\n" + "\n".join(bad))
