@@ -49,7 +49,7 @@ def field_groups(params_cls=LACParams) -> list[tuple[str, list[str]]]:
 def _algo_section(algo: str, first: bool) -> list[str]:
     """One algorithm's fields (grouped) and its presets. The fields every constrained algorithm has
     (``SafeTaskParams``) are listed with the first algorithm only."""
-    from lac_rllib.algorithms.registry import algo_config
+    from lac_rllib.algorithms.registry import DEFAULT_ALGO, algo_config
     from lac_rllib.constrained.task_config import SafeTaskParams
 
     mod = algo_config(algo)
@@ -59,7 +59,8 @@ def _algo_section(algo: str, first: bool) -> list[str]:
     out = ["", f"## {fields.what} (`algo={algo}`)", "",
            f"`{params.__name__}` in `{mod.__name__.replace('.', '/')}.py`. Set a field with "
            f"`{cls}().training(name=value)`, `lac-train --algo {algo} --set name=value` or the sweep's "
-           f"`--set name=value`" + (f" (with `--set algo={algo}` or `--space compare`)." if algo != "lac" else ".")]
+           f"`--set name=value`"
+           + (f" (with `--set algo={algo}` or `--space compare`)." if algo != DEFAULT_ALGO else ".")]
     if not first:
         out += ["Its task and observation-filter fields are those of every algorithm (first section)."]
     for title, names in field_groups(params):
@@ -71,10 +72,12 @@ def _algo_section(algo: str, first: bool) -> list[str]:
         out += [f"| `{n}` | {_code(defaults[n])} | {_cell(fields.ranges[n].text)} | {_cell(docs.get(n, ''))} |"
                 for n in names]
     touched = [n for n in defaults if any(n in p for p in presets.values())]
+    family = mod.CONFIG_CLASS.TASK_FAMILY_OVERRIDES
+    family_text = "; ".join(f"{f} tasks: " + ", ".join(f"`{k}={v!r}`" for k, v in o.items()) for f, o in family.items())
     out += [
         "", f"### {fields.what} presets", "",
         f"`{cls}().task(id)` applies the task's preset (`PRESETS` in `{mod.__name__.replace('.', '/')}.py`)"
-        + (", then the task's own overrides (Tasks, below)" if algo == "lac" else "")
+        + (f", then its overrides per task family (the Tasks table's family: {family_text})" if family else "")
         + "; explicit `training(...)` values win. An empty cell keeps the default.",
         "",
         "| field | default | " + " | ".join(f"`{p}`" for p in presets) + " |",
@@ -104,10 +107,11 @@ def config_markdown() -> str:
         out += _algo_section(algo, first=i == 0)
 
     out += ["", "## Tasks", "",
-            "The registered tasks (`lac_rllib/tasks/`; spec.md §6): the preset each applies, its own overrides,",
+            "The registered tasks (`lac_rllib/tasks/`; spec.md §6): the preset each applies, its family",
+            "(an algorithm may set fields per family: its presets above),",
             "where its per-step cost comes from, the cost limit b and the discount of its episode cost Ĵ_C",
             "(1 = a plain sum).",
-            "", "| task | preset | overrides | cost per step | cost limit | episode cost discount |",
+            "", "| task | preset | family | cost per step | cost limit | episode cost discount |",
             "|---|---|---|---|---|---|"]
     from lac_rllib.tasks.user import FACTORY as USER_FACTORY
 
@@ -115,8 +119,7 @@ def config_markdown() -> str:
         t = get_task(task_id)
         if t.factory == USER_FACTORY:  # a user's env registered in this process is not a built-in task
             continue
-        overrides = ", ".join(f"`{k}={v!r}`" for k, v in t.overrides.items())
-        out.append(f"| `{t.id}` | `{t.preset}` | {overrides} | {_cell(t.cost_source)} | {t.cost_limit:g} "
+        out.append(f"| `{t.id}` | `{t.preset}` | {t.family} | {_cell(t.cost_source)} | {t.cost_limit:g} "
                    f"| {t.episode_cost_discount:g} |")
     return "\n".join(out) + "\n"
 

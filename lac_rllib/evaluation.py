@@ -78,7 +78,9 @@ class Policy:
     @property
     def algo(self) -> str:
         """The algorithm that wrote the checkpoint (lac_rllib/algorithms/registry.py)."""
-        return str(self.metadata.get("algo") or "lac")
+        from lac_rllib.algorithms.registry import DEFAULT_ALGO
+
+        return str(self.metadata.get("algo") or DEFAULT_ALGO)
 
     @property
     def actions(self) -> tuple[str, ...]:

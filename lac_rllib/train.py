@@ -1,5 +1,5 @@
 """Single-run trainer: ``python -m lac_rllib.train --task ID --timesteps N --seed S --output DIR``
-(``--algo ppo_lag|sac_lag`` trains a baseline instead of LAC).
+(``--algo NAME`` trains another algorithm of the registry instead: lac_rllib/algorithms/registry.py).
 
 Prints one progress line per iteration and, as the last line of stdout, one JSON object with
 the final metrics and the checkpoint path. Every argument is checked before Ray starts.
@@ -153,7 +153,7 @@ def train(config, timesteps: int, output: str, *, log=print, checkpoint_every: i
                 progress.writelines(json.dumps(r) + "\n" for r in rows)
                 progress.flush()
                 while row is None or row[ENV_STEPS] < timesteps:
-                    row = {**iteration_row(algo.train()), "time_s": time.time() - start}
+                    row = {**iteration_row(algo.train(), algo.config.REPORTED_KEYS), "time_s": time.time() - start}
                     progress.write(json.dumps(row) + "\n")
                     progress.flush()  # a run killed mid-way keeps every finished iteration
                     log(f"iter {row[ITERATION]:4d}  steps {int(row[ENV_STEPS]):8d}  return "
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         prog="lac-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="LAC fields for --set:\n" + "\n".join(
             f"  {k}: {docs.get(k, '')} Accepted: {FIELD_RANGES[k].text}." for k in sorted(FIELD_NAMES))
-        + "\n\nThe baselines' fields (--algo ppo_lag | sac_lag): docs/config.md.",
+        + f"\n\nThe other algorithms' fields (--algo {registry.algos_text()}): docs/config.md.",
     )
     parser.add_argument("--algo", default=registry.DEFAULT_ALGO, choices=list(registry.ALGOS),
                         help="the algorithm: LAC or a baseline (default lac)")

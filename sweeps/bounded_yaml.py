@@ -21,7 +21,7 @@ from pathlib import Path
 
 import yaml
 
-from lac_rllib.constrained.fields import excerpt
+from lac_rllib.errors import excerpt
 
 MAX_BYTES = 1 << 20  #: a sweep file is a page of text; the largest built-in one is ~3 KB
 MAX_DEPTH = 32  #: nesting levels, expanded (the deepest key path of the schema is 7)

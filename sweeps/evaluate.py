@@ -40,6 +40,8 @@ import os
 import sys
 import tempfile
 
+from lac_rllib.algorithms.registry import DEFAULT_ALGO
+
 PROG = "evaluate"
 EVAL_PREFIX = "eval"
 # The tag names (CHECKPOINT_TAG, SWEEP_TAG, PARENT_TAG) live in sweeps.tracking; it imports
@@ -237,7 +239,7 @@ def format_human(result: dict, source: str) -> str:
     convention = "summed" if gamma == 1.0 else f"discounted with {gamma:g}"
     lines = [
         f"{source}",
-        f"task {result['task']}  algo {result.get('algo', 'lac')}  actions {result['actions']}  episodes {n}  "
+        f"task {result['task']}  algo {result.get('algo', DEFAULT_ALGO)}  actions {result['actions']}  episodes {n}  "
         f"seeds {result['seed']}..{result['seed'] + n - 1}",
         f"return         {_pm(result['return_mean'], result['return_std'])}",
         f"cost           {_pm(result['cost_mean'], result['cost_std'])}  ({convention} per episode)",

@@ -27,9 +27,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from sweeps.report import _fmt_value, _is_na  # noqa: E402
 
-LAC = "lac"
+LAC = DEFAULT_ALGO  # the project's algorithm (the registry's default)
 LAC_COLOUR = "tab:blue"
 # Baselines cycle through these (tab:blue is LAC's, tab:red the cost limit's).
 BASELINE_COLOURS = ("tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan",

@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE  # noqa: E402
 from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 
@@ -198,7 +199,7 @@ def algorithm_comparison(summary: pd.DataFrame) -> str:
                  "cost IQM [95% CI] | feasible seeds | P(LAC return > X) | P(LAC cost < X) |",
                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for r in g.to_dict("records"):
-            lac = r["value"] == "lac"
+            lac = r["value"] == DEFAULT_ALGO
             beats = ["–", "–"] if lac else [_poi(1 - r[k]) if not _is_na(r[k]) else "–"
                                             for k in ("poi_return_vs_default", "poi_cost_vs_default")]
             lines.append("| " + " | ".join([str(r["value"]), _seeds(r), *_stat_cells(r)[:5], *beats]) + " |")

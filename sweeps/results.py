@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from lac_rllib.constrained.metrics import (
     ACTOR_STD_MEAN,
     COST_LIMIT,
@@ -60,7 +61,7 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
         p, m, tid = run.data.params, run.data.metrics, run.data.tags.get("lac.trial_id", run.info.run_id)
         rows.append({"trial_id": tid, "group": p.get(P_GROUP, ""), "param": p.get(P_SWEPT_PARAM, ""),
                      "value": param_value(p.get(P_SWEPT_VALUE, "null")), "task": p.get(P_TASK),
-                     "seed": int(p.get(P_SEED, 0)), "algo": p.get(P_ALGO, "lac"),
+                     "seed": int(p.get(P_SEED, 0)), "algo": p.get(P_ALGO, DEFAULT_ALGO),
                      "config": run.data.tags.get(CONFIG_TAG, ""), "config_id": run.data.tags.get(CONFIG_ID_TAG, ""),
                      "default": run.data.tags.get(DEFAULT_TAG) == "1",
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")

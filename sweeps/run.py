@@ -19,7 +19,7 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, check_algo
+from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, algos_text, check_algo, plan_update_s
 from sweeps import spaces, sweep_file
 from sweeps.lock import DriverLock, SweepLocked
 from sweeps.plan import Infra, Plan
@@ -27,10 +27,10 @@ from sweeps.record import SWEEP_FILE, resume_differences
 from sweeps.sweep_file import SweepFile
 from sweeps.tracking import check_reachable, default_tracking_uri
 
-# The plan's estimate, per preset: env steps per second of one trial on 1 CPU without the chain,
-# and chain seconds per env step and per Langevin step (calibration: docs/sweeps.md).
+# The plan's estimate, per preset: env steps per second of one trial on 1 CPU, sampling and the
+# update's part every algorithm has (calibration: docs/sweeps.md); each algorithm adds its own
+# update's seconds per env step (``plan_update_s`` in its folder, read through the registry).
 RATE = {"tiny": 405.0, "safety_gym": 377.0, "mujoco": 185.0}
-CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
 STARTUP_S = 15.0
 #: The most trials a sweep may plan unless --max-trials says more: counted before any is built
 #: (the plan holds each trial's resolved fields; ~10 ms and a few KB each).
@@ -39,8 +39,6 @@ MAX_TRIALS = 5_000
 FLAG_OF = {"task": "--task", "budget": "--budget", "num_samples": "--num-samples", "scheduler": "--scheduler",
            "max_concurrent": "--max-concurrent", "cpus_per_trial": "--cpus-per-trial",
            "experiment": "--experiment", "name": "--name"}
-# A baseline's update seconds per env step (SAC-Lag: per update per env step) at the tiny sizes.
-UPDATE_S_PER_STEP = {"ppo_lag": 2e-4, "sac_lag": 2e-3}
 
 
 def _int_at_least(low: int):
@@ -120,7 +118,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="the confirmation's budget: the sweep's (default) or a larger one")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
-                        "algo=ppo_lag|sac_lag runs a baseline (fields: docs/config.md)")
+                        f"algo={algos_text('|')} picks the algorithm (fields: docs/config.md)")
     return p.parse_args(argv)
 
 
@@ -420,18 +418,14 @@ def check_optuna_study(url: str, name: str, resume: bool) -> None:
 
 def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
     """Rough wall seconds of one trial of ``steps`` env steps whose fields are ``params``
-    (``spaces.trial_params``): start-up, then env steps at the preset's measured rate, plus LAC's
-    chain share, which grows with T, or a baseline's update share (measured on this project's
-    2-core machine)."""
+    (``spaces.trial_params``): start-up, then env steps at the preset's measured rate, plus the
+    algorithm's own update share (LAC's chain grows with T; measured on this project's 2-core
+    machine)."""
     from lac_rllib.tasks import get_task
 
     preset = get_task(task).preset
-    algo = params.get("algo", "lac")
-    if algo == "lac":
-        extra = CHAIN_S_PER_STEP.get(preset, 0.0) * params["langevin_steps"] * steps
-    else:
-        extra = UPDATE_S_PER_STEP[algo] * params.get("updates_per_env_step", 1.0) * steps
-    return STARTUP_S + (steps / RATE[preset] + extra) / cpus ** 0.5
+    extra = plan_update_s(params.get(ALGO_FIELD, DEFAULT_ALGO), params, preset) * steps
+    return STARTUP_S + (steps / RATE.get(preset, min(RATE.values())) + extra) / cpus ** 0.5
 
 
 def estimate_wall_s(per_trial: list[float], concurrency: int) -> float:
@@ -559,7 +553,7 @@ def run_confirmation(plan: Plan, sweep_dir: Path, commit: str) -> int:
         return 0
     name = f"{plan.name}-confirm"
     # The baselines the sweep ran (besides its own algorithm) rerun at their defaults beside the winners.
-    baselines = tuple(a for a in dict.fromkeys(trials["algo"]) if a not in plan.sweep.algo and a != "lac")
+    baselines = tuple(a for a in dict.fromkeys(trials["algo"]) if a not in plan.sweep.algo and a != DEFAULT_ALGO)
     cfile = confirm.confirmation_file(plan.sweep, top, seeds, budget, name, baselines)
     cdir = Path(plan.storage) / name
     infra = dataclasses.replace(plan.infra, resume=(cdir / SWEEP_FILE).exists())

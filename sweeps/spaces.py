@@ -13,6 +13,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from lac_rllib.algorithms.registry import DEFAULT_ALGO  # no RLlib import: the registry imports lazily
+
 REPEAT_INDEX = "__trial_index__"  # ray.tune.search.repeater.TRIAL_INDEX (not imported: no Ray before the plan)
 DEFAULT_TASK = "lac/PointHazard-v0"  # a sweep file that names no task: a task that learns in minutes
 QUICK_TINY_STEPS = 40_000
@@ -20,79 +22,48 @@ QUICK_TINY_STEPS = 40_000
 
 @dataclasses.dataclass(frozen=True)
 class Budget:
-    """Env steps per trial and the LAC overrides that make that budget meaningful, per task preset
-    (``lac_rllib.algorithms.lac.config.PRESETS``; ``"*"`` for any other preset). Every algorithm
-    gets the same env steps; a baseline gets its own overrides (``by_algo``: algo → preset → fields)."""
+    """Env steps per trial, per task preset (``"*"``: any other preset), and the budget's ``name``:
+    every algorithm gets the same env steps, and at a named budget each algorithm sets the fields
+    it declares for it (``BUDGET_FIELDS`` in its config module, read through the registry)."""
 
-    by_preset: dict
+    steps: dict
     doc: str
-    #: A baseline's overrides at this budget, per preset ("*": any other); none: its preset's values.
-    by_algo: dict = dataclasses.field(default_factory=dict)
+    name: str | None = None  #: smoke | quick | paper; None: a number of env steps (the presets' own fields)
 
-    def for_preset(self, preset: str, algo: str = "lac") -> tuple[int, dict]:
-        steps, lac_overrides = self.by_preset.get(preset, self.by_preset["*"])
-        if algo == "lac":
-            return steps, lac_overrides
-        own = self.by_algo.get(algo, {})
-        return steps, own.get(preset, own.get("*", {}))
+    def for_preset(self, preset: str, algo: str = DEFAULT_ALGO) -> tuple[int, dict]:
+        from lac_rllib.algorithms.registry import budget_fields
 
-    def for_task(self, task: str, algo: str = "lac") -> tuple[int, dict]:
+        steps = self.steps.get(preset, self.steps["*"])
+        return steps, budget_fields(algo, self.name, preset) if self.name else {}
+
+    def for_task(self, task: str, algo: str = DEFAULT_ALGO) -> tuple[int, dict]:
         from lac_rllib.tasks import get_task
 
         return self.for_preset(get_task(task).preset, algo)
 
     def describe(self) -> str:
-        steps = ", ".join(f"{n:,}" + ("" if p == "*" else f" on {p} tasks") for p, (n, _) in self.by_preset.items())
+        steps = ", ".join(f"{n:,}" + ("" if p == "*" else f" on {p} tasks") for p, n in self.steps.items())
         return f"{steps} env steps: {self.doc}"
 
 
-# A trial this short cannot repay a compile of the fused chain (~15-40 s per process): eager.
-_SMOKE = {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
-          "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1, "langevin_fused": False}
-# The baselines at the smoke budget (same sizes) and at the quick budget on the paper's tasks (64-wide
-# nets, one env, 2k-step iterations as LAC's); on the tiny task their own tiny presets are the quick budget.
-_SMOKE_BY_ALGO = {
-    "ppo_lag": {"*": {"train_batch_size_per_learner": 500, "minibatch_size": 100, "num_epochs": 2, "hidden": (32, 32),
-                      "num_envs_per_env_runner": 1}},
-    "sac_lag": {"*": {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_env_steps": 500,
-                      "warmup_env_steps": 500, "actor_hidden": (32, 32), "critic_hidden": (32, 32),
-                      "num_envs_per_env_runner": 1}},
-}
-_QUICK_BY_ALGO = {
-    "ppo_lag": {"tiny": {}, "*": {"train_batch_size_per_learner": 2_000, "hidden": (64, 64),
-                                  "num_envs_per_env_runner": 1}},
-    "sac_lag": {"tiny": {}, "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000,
-                                  "random_env_steps": 2_000, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
-                                  "num_envs_per_env_runner": 1}},
-}
+# The default ablation (python sweeps/run.py --space ablation) runs on the tiny task, where
+# QUICK_TINY_STEPS of the tiny preset learn, on a reduced Table 3 grid (sweeps/builtin/ablation.yaml);
+# calibrated by running it (docs/sweeps.md). On the paper's tasks 16k steps are a machinery check:
+# the paper's 2.5M cannot be shrunk that far. What each algorithm sets at each budget is declared
+# in its folder (BUDGET_FIELDS).
 BUDGETS: dict[str, Budget] = {
-    "smoke": Budget({"*": (2_000, _SMOKE)}, "seconds per trial: proves the machinery, learns nothing",
-                    by_algo=_SMOKE_BY_ALGO),
-    # The default ablation (python sweeps/run.py --space ablation): on the tiny task, where
-    # QUICK_TINY_STEPS of the tiny preset learn, on a reduced Table 3 grid (sweeps/builtin/ablation.yaml);
-    # calibrated by running it (docs/sweeps.md). The fused chain pays here: a T = 30 trial runs
-    # ~1,400 chains of 30 steps, and the compiled kernels are cached on disk across trials. Ten
-    # envs per runner: RLlib's per-step machinery took 55% of a one-env trial (py-spy); ten
-    # 100-step episodes still complete in every 1,000-step iteration.
-    # On the paper's tasks 16k steps (64-wide nets, one env so 2k-step iterations complete
-    # 1000-step episodes) are a machinery check: the paper's 2.5M cannot be shrunk that far.
-    "quick": Budget({"tiny": (QUICK_TINY_STEPS, {"langevin_steps": 20, "langevin_fused": True,
-                                                  "num_envs_per_env_runner": 10}),
-                     "*": (16_000, {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
-                                    "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
-                                    "num_envs_per_env_runner": 1, "langevin_fused": False})},
+    "smoke": Budget({"*": 2_000}, "seconds per trial: proves the machinery, learns nothing", "smoke"),
+    "quick": Budget({"tiny": QUICK_TINY_STEPS, "*": 16_000},
                     "the default ablation learns lac/PointHazard-v0 in ~30 min on 2 cores; on the paper's tasks "
-                    "a machinery check that learns nothing",
-                    by_algo=_QUICK_BY_ALGO),
-    "paper": Budget({"*": (2_500_000, {})}, "the paper's 2.5M env steps with the docs/spec.md §5 presets"),
+                    "a machinery check that learns nothing", "quick"),
+    "paper": Budget({"*": 2_500_000}, "the paper's 2.5M env steps with the docs/spec.md §5 presets", "paper"),
 }
-
 
 
 def get_budget(budget: str | int) -> Budget:
     """A named budget (``BUDGETS``) or a number of env steps (with the presets' own fields)."""
     if isinstance(budget, int) and not isinstance(budget, bool):
-        return Budget({"*": (budget, {})}, "env steps with each algorithm's preset fields")
+        return Budget({"*": budget}, "env steps with each algorithm's preset fields")
     if budget not in BUDGETS:
         raise ValueError(f"unknown budget {budget!r}; accepted: {' | '.join(BUDGETS)} or a number of env steps")
     return BUDGETS[budget]
@@ -134,7 +105,7 @@ class TrialSpec:
             return search_label(self.sampled, None)
         task = self.task.split("/")[-1]
         label = f"{self.group}-{self.param}={self.value}-{task}" if self.param else f"{self.group}-{task}"
-        return label if self.algo == "lac" or self.param == "algo" else f"{self.algo}-{label}"
+        return label if self.algo == DEFAULT_ALGO or self.param == "algo" else f"{self.algo}-{label}"
 
     def label(self) -> str:
         return f"{self.config_label()}-s{self.seed}"
@@ -256,9 +227,10 @@ def tune_search_space(search: dict) -> dict:
 def trial_params(task: str, budget: str, sets: dict, overrides: dict | None = None) -> dict[str, Any]:
     """``algo`` and every field of that algorithm in a trial of ``task`` at ``budget``: the one place
     the precedence is written. The algorithm is the trial's ``algo`` override, else ``--set algo=``,
-    else LAC. Then the algorithm's preset for the task < the task's own overrides (LAC only:
-    ``TaskSpec.overrides``, e.g. T = 50 on the Button tasks) < the budget's overrides for that
-    algorithm < the user's ``--set`` < the trial's own ``overrides`` (the swept or sampled value).
+    else the default algorithm. Then the algorithm's preset for the task < its overrides for the
+    task's family (``TASK_FAMILY_OVERRIDES``, e.g. LAC's T = 50 on the Button tasks) < the fields it
+    declares for the budget (``BUDGET_FIELDS``) < the user's ``--set`` < the trial's own
+    ``overrides`` (the swept or sampled value).
     ``build_config`` applies the first two (``SafeTaskConfig.task``); the horizon of the
     learning-rate decay is the budget's env steps unless an override names another."""
     from lac_rllib.algorithms.registry import ALGO_FIELD, build_config, split_algo

@@ -41,7 +41,8 @@ from pydantic import (
     model_validator,
 )
 
-from lac_rllib.constrained.fields import excerpt
+from lac_rllib.algorithms.registry import DEFAULT_ALGO
+from lac_rllib.errors import excerpt
 from sweeps.bounded_yaml import YamlRefused
 from sweeps.bounded_yaml import read as read_yaml
 from sweeps.bounded_yaml import read_text as read_yaml_text
@@ -322,8 +323,9 @@ class SweepFile(BaseModel):
     task: tuple[TaskRef, ...] | None = Field(None, min_length=1)
     """A task id (docs/tasks.md), a user env (``{factory: "pkg.mod:make", cost_limit: 10}``) or a
     list of them; default ``lac/PointHazard-v0``."""
-    algo: tuple[str, ...] = ("lac",)
-    """The algorithm (``lac | ppo_lag | sac_lag``) or a list (every configuration runs with each)."""
+    algo: tuple[str, ...] = (DEFAULT_ALGO,)
+    """The algorithm (a name of the registry, lac_rllib/algorithms/registry.py: docs/config.md lists
+    each with its fields) or a list (every configuration runs with each)."""
     budget: str | int | None = None
     """Env steps per trial: a named budget (``smoke | quick | paper``, with the overrides that make
     it meaningful: docs/sweeps.md) or a number of env steps in [1, 10¹⁰] (the presets' fields);

@@ -35,7 +35,7 @@ STOPPED_TAG = "lac.stopped_early"  # on a child run the scheduler (ASHA) stopped
 # A child run's params besides every LAC field (written by sweeps/trainable.py, read by the report).
 P_TASK, P_SEED, P_GROUP, P_TIMESTEPS = "task", "seed", "group", "timesteps"
 P_TASK_SOURCE = "task_source"  # what builds the task's env: a factory ("module:function") or a gymnasium id
-P_ALGO, ALGO_TAG = "algo", "lac.algo"  # which algorithm the run trained: lac | ppo_lag | sac_lag
+P_ALGO, ALGO_TAG = "algo", "lac.algo"  # which algorithm the run trained (a registry name)
 P_SWEPT_PARAM, P_SWEPT_VALUE = "swept_param", "swept_value"  # the grid point: which field, which value
 CONFIG_ID_TAG = "lac.config_id"  # a child run's configuration without its seed (spaces.config_id)
 CONFIG_TAG = "lac.config"  # the same, readable (group-param=value-task, or the search sample)

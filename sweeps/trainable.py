@@ -125,7 +125,7 @@ class LACTrainable(tune.Trainable):
             if self.iteration + 1 == self.spec.fail_at_iteration:
                 raise RuntimeError(f"injected failure at iteration {self.iteration + 1} (fail_at_iteration)")
             r = self.algo.train()
-            metrics = iteration_row(r)
+            metrics = iteration_row(r, self.algo.config.REPORTED_KEYS)
             del metrics[ITERATION]  # Tune counts its own (training_iteration); MLflow's step is env steps
             bad = non_finite(metrics)
             if bad:

@@ -9,7 +9,12 @@ docs treat every algorithm alike:
 - ``PRESETS``: per task family (``mujoco``, ``safety_gym``, ``tiny``: ``TaskSpec.preset``);
 - ``SPEED_FIELDS``: fields that change how fast a run goes, not what it learns;
 - ``ACTIONS``: what ``lac-eval --actions`` accepts for its policies;
-- ``build_config(task, seed, sets, num_env_runners=0, timesteps=None, cpus=1)``: the validated config.
+- ``build_config(task, seed, sets, num_env_runners=0, timesteps=None, cpus=1)``: the validated config;
+- optional, read through the functions below (an algorithm without them gets their defaults):
+  ``BUDGET_FIELDS`` (a sweep's named budget → task preset or ``"*"`` → the fields it sets: the
+  smoke and quick sizes), ``plan_update_s(params, preset)`` (the plan's estimate of its update
+  seconds per env step on one CPU), and on ``CONFIG_CLASS`` ``REPORTED_KEYS`` (the learner's values
+  an iteration's row carries) and ``TASK_FAMILY_OVERRIDES`` (fields per task family).
 
 Imports are lazy: naming an algorithm costs nothing until it is built.
 """
@@ -39,6 +44,30 @@ def check_algo(algo) -> str:
 def algo_config(algo: str) -> ModuleType:
     """The config module of ``algo`` (an unknown name raises a ValueError listing the accepted ones)."""
     return importlib.import_module(ALGOS[check_algo(algo)])
+
+
+def algos_text(sep: str = " | ") -> str:
+    """The algorithms' names as help texts and errors list them."""
+    return sep.join(ALGOS)
+
+
+def budget_fields(algo: str, budget: str, preset: str) -> dict:
+    """The fields ``algo`` sets at the named ``budget`` on a task of ``preset`` (its
+    ``BUDGET_FIELDS``; none declared: its preset's values)."""
+    by_preset = getattr(algo_config(algo), "BUDGET_FIELDS", {}).get(budget, {})
+    return dict(by_preset.get(preset, by_preset.get("*", {})))
+
+
+def plan_update_s(algo: str, params: dict, preset: str) -> float:
+    """The plan's estimate of ``algo``'s update seconds per env step on one CPU, beyond sampling
+    (its ``plan_update_s``; none declared: 0, the estimate is the sampling alone)."""
+    estimate = getattr(algo_config(algo), "plan_update_s", None)
+    return float(estimate(params, preset)) if estimate else 0.0
+
+
+def reported_keys(algo: str) -> tuple[str, ...]:
+    """The learner's values an iteration's row of ``algo`` reports (``CONFIG_CLASS.REPORTED_KEYS``)."""
+    return tuple(algo_config(algo).CONFIG_CLASS.REPORTED_KEYS)
 
 
 def split_algo(sets: dict) -> tuple[str, dict]:

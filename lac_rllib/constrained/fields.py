@@ -11,8 +11,9 @@ import ast
 import dataclasses
 import inspect
 import math
-import reprlib
 from typing import Any, Callable
+
+from lac_rllib.errors import excerpt
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,15 +82,6 @@ def check_value(ranges: dict[str, Accepted], name: str, value: Any, *, what: str
         raise ValueError(f"{what} config field {name}={excerpt(value)} is invalid; accepted: {accepted.text}")
 
 
-def excerpt(value: Any, limit: int = 60) -> str:
-    """A bad value as an error line quotes it: a short, cut ``repr`` (a value from a sweep file may
-    be huge: never the whole of it)."""
-    text = _REPR.repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-_REPR = reprlib.Repr()  # Python 3.11's takes no keywords
-_REPR.maxstring, _REPR.maxother, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxlevel = 40, 40, 4, 4, 3, 2
 
 
 def parse_sets(pairs: list[str], names, *, what: str) -> dict:

@@ -51,9 +51,6 @@ COST_WINDOW_MEAN = "cost_window_mean"  # Ĵ_C that ν's step used (NaN: no episo
 KL_FULL_BATCH = "kl_full_batch"  # KL(π_old ‖ π) over the batch at the last epoch check
 EPOCHS_TRAINED = "epochs_before_kl_stop"  # epochs the policy trained this iteration
 PPO_LAG_KEYS = (POLICY_LOSS, VF_LOSS, COST_VF_LOSS, COST_WINDOW_MEAN, KL_FULL_BATCH, EPOCHS_TRAINED)
-#: The learner's values of an iteration's row (those an algorithm logs; absent ones are left out).
-REPORTED_LEARNER_KEYS = (CRITIC_LOSS, ACTOR_LOSS, ACTOR_NLL, ACTOR_KL, Q_REWARD_MEAN, Q_COST_MEAN,
-                         TARGET_REWARD_MEAN, TARGET_COST_MEAN, NU_MAX, *CHAIN_HEALTH_KEYS, *PPO_LAG_KEYS)
 #: A row's values that must be finite: a NaN here fails the trial (sweeps/trainable.py).
 MUST_BE_FINITE = (CRITIC_LOSS, ACTOR_LOSS, NU)
 
@@ -71,12 +68,14 @@ EPISODE_COST_MEAN = "episode_cost_mean"
 ITERATION = "iteration"  # training_iteration, 1-based as RLlib counts it
 
 
-def iteration_row(result: dict, module_id: str = DEFAULT_MODULE_ID) -> dict[str, float]:
+def iteration_row(result: dict, reported: tuple[str, ...] = (), module_id: str = DEFAULT_MODULE_ID
+                  ) -> dict[str, float]:
     """One iteration's row from ``Algorithm.train()``'s result: the top-level keys, the learner's
-    reported keys it logged, and the iteration. Every value a float (the iteration an int)."""
+    values the algorithm reports (``reported``: its config's ``REPORTED_KEYS``) that it logged this
+    iteration, and the iteration. Every value a float (the iteration an int)."""
     row = {k: float(result[k]) for k in TOP_LEVEL_KEYS}
     learner = result.get(LEARNER_RESULTS, {}).get(module_id, {})
-    row.update({k: float(learner[k]) for k in REPORTED_LEARNER_KEYS if k in learner})
+    row.update({k: float(learner[k]) for k in reported if k in learner})
     row[ITERATION] = int(result[TRAINING_ITERATION])
     return row
 

@@ -61,8 +61,11 @@ class SafeTaskConfig:
     #: The algorithm's params dataclass (a SafeTaskParams) and its FieldSet.
     PARAMS: type = SafeTaskParams
     FIELDS = None
-    #: Whether ``.task(id)`` applies the task's own overrides (``TaskSpec.overrides``: LAC fields).
-    APPLY_TASK_OVERRIDES = False
+    #: Task family (``TaskSpec.family``, e.g. ``Button``) → the fields this algorithm sets there,
+    #: on top of the preset (LAC's T = 50 on the Button tasks).
+    TASK_FAMILY_OVERRIDES: dict[str, dict[str, Any]] = {}
+    #: The learner's values an iteration's row reports (lac_rllib/constrained/metrics.py names them).
+    REPORTED_KEYS: tuple[str, ...] = ()
 
     def __init__(self, algo_class=None):
         super().__init__(algo_class=algo_class)
@@ -80,14 +83,15 @@ class SafeTaskConfig:
         self.torch_skip_nan_gradients = True
 
     def task(self, task_id: str, *, preset: str | None = None):
-        """Train on a registered safe task: its preset (or ``preset``), then the task's own
-        overrides, then the env. Explicit ``training(...)`` values set afterwards win over both."""
+        """Train on a registered safe task: its preset (or ``preset``), then this algorithm's
+        overrides for the task's family, then the env. Explicit ``training(...)`` values set
+        afterwards win over both."""
         spec = get_task(task_id)  # unknown id -> ValueError listing the known ones
         name = preset or spec.preset
         if name not in self.PRESETS:
             raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(self.PRESETS)}")
         self.task_id, self._task_spec = task_id, spec
-        self.training(**{**self.PRESETS[name], **(spec.overrides if self.APPLY_TASK_OVERRIDES else {})})
+        self.training(**{**self.PRESETS[name], **self.TASK_FAMILY_OVERRIDES.get(spec.family, {})})
         register_task_env(spec)
         self.environment(env=task_id)
         return self

@@ -45,8 +45,9 @@ class TaskSpec:
     cost_source: str = 'info["cost"]'
     #: Keyword arguments passed to the factory by default.
     kwargs: dict = dataclasses.field(default_factory=dict)
-    #: LAC fields this task sets on top of its preset (e.g. T = 50 on the Button tasks).
-    overrides: dict = dataclasses.field(default_factory=dict)
+    #: The task's family (Safety-Gymnasium's task without its level: ``Goal``, ``Button``, ...; empty
+    #: for others): an algorithm may set fields per family (``TASK_FAMILY_OVERRIDES``).
+    family: str = ""
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""
@@ -85,7 +86,7 @@ def get_task(task_id: str) -> TaskSpec:
     except (KeyError, TypeError):
         import difflib
 
-        from lac_rllib.constrained.fields import excerpt
+        from lac_rllib.errors import excerpt
 
         close = difflib.get_close_matches(str(task_id), sorted(_TASKS), n=3, cutoff=0.0)
         raise ValueError(f"unknown task {excerpt(task_id)}; closest known tasks: {', '.join(close)} "

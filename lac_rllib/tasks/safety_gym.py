@@ -176,10 +176,6 @@ NAV_COSTS: dict[str, str] = {
 #: ``num_steps`` = 500 too); every other task runs 1000 steps.
 NAV_EPISODE_STEPS: dict[str, int] = {"Circle": 500, "Run": 500}
 
-#: Table 5 sets T = 50 Langevin steps on the Button1 tasks; we apply it to the whole Button family
-#: (levels 0-2), whose goal (press the one right button among several) is the same.
-NAV_OVERRIDES: dict[str, dict] = {"Button": {"langevin_steps": 50}}
-
 #: Velocity v1 tasks: robot → (obs_dim, act_dim, indicator) with the thresholds of
 #: safety_gymnasium/tasks/safe_velocity/*_v1.py (speed: planar, finite difference per step).
 VELOCITY: dict[str, tuple[int, int, str]] = {
@@ -224,7 +220,7 @@ def _nav(robot: str, task: str) -> TaskSpec:
         act_dim=NAV_ROBOTS[robot],
         cost_source=f'safety_gymnasium info["cost"] in {{0,1}} ({NAV_COSTS[task]}), summed',
         kwargs={"env_id": env_id},
-        overrides=dict(NAV_OVERRIDES.get(_family(task), {})),
+        family=_family(task),
     )
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lac_rllib.constrained.fields import excerpt
+from lac_rllib.errors import excerpt
 from lac_rllib.tasks.registry import TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.user:make_env"
@@ -176,5 +176,9 @@ def definition(spec: TaskSpec) -> dict[str, Any]:
 
 
 def register_definition(spec: dict[str, Any]) -> TaskSpec:
-    """Register a user task in this process from :func:`definition`'s data (no env is built)."""
-    return register(TaskSpec(**spec))
+    """Register a user task in this process from :func:`definition`'s data (no env is built).
+    Keys a TaskSpec no longer has are dropped (``overrides``, before 0.3: a user task had none)."""
+    import dataclasses
+
+    known = {f.name for f in dataclasses.fields(TaskSpec)}
+    return register(TaskSpec(**{k: v for k, v in spec.items() if k in known}))

@@ -50,7 +50,9 @@ def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypat
     """The Button tasks run T = 50 (their own override, over the preset's and LAC's 30): the plan's
     estimate counts T = 50, and the user's --set wins over the task's own value."""
     steps = 2_500_000
-    chain = cli.CHAIN_S_PER_STEP["safety_gym"] * steps
+    from lac_rllib.algorithms.lac.config import CHAIN_S_PER_STEP
+
+    chain = CHAIN_S_PER_STEP["safety_gym"] * steps
 
     def formula(t):  # one trial, 1 CPU: the estimate is this trial's
         return cli.STARTUP_S + steps / cli.RATE["safety_gym"] + chain * t

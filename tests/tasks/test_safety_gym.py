@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from lac_rllib.algorithms.lac.config import LACConfig
 from lac_rllib.tasks import TaskSpec, get_task, known_tasks, safety_gym, safety_gym_compat
 
 DOCS_TASKS = Path(__file__).resolve().parents[2] / "docs" / "tasks.md"
@@ -53,10 +54,10 @@ def test_specs():
     assert set(NAV) | set(VEL) <= set(known_tasks())
 
 
-def test_unknown_id_lists_known_ids():
-    with pytest.raises(ValueError, match="SafetyCarButton1-v0") as err:
+def test_unknown_id_names_the_closest_known_ids():
+    with pytest.raises(ValueError, match=r"closest known tasks: SafetyPointGoal\d-v0, ") as err:
         get_task("SafetyPointGoal3-v0")
-    assert "focops/HumanoidCircle-v0" in str(err.value)
+    assert "focops/HumanoidCircle-v0" not in str(err.value) and "docs/tasks.md" in str(err.value)
     with pytest.raises(ValueError, match="SafetyPointGoal1-v0"):
         safety_gym.make_env({"env_id": "SafetyPointGoal3-v0"})
 
@@ -248,10 +249,10 @@ def _safety_ids() -> set[str]:
 
 def test_original_seven_task_specs_unchanged():
     """Other code and evidence rely on these exact values."""
-    def nav(env_id, obs, hazards, overrides=None):
+    def nav(env_id, obs, hazards, family):
         return TaskSpec(env_id, safety_gym.FACTORY, 25.0, 1.0, "safety_gym", obs, 2,
                         f'safety_gymnasium info["cost"] in {{0,1}} ({hazards}), summed',
-                        {"env_id": env_id}, overrides or {})
+                        {"env_id": env_id}, family)
 
     def vel(env_id, obs, act, indicator):
         return TaskSpec(env_id, safety_gym.FACTORY, 25.0, 1.0, "mujoco", obs, act,
@@ -259,16 +260,19 @@ def test_original_seven_task_specs_unchanged():
 
     button = "hazards, gremlins, wrong buttons"
     expected = [
-        nav("SafetyPointGoal1-v0", 60, "hazards"),
-        nav("SafetyCarGoal1-v0", 72, "hazards"),
-        nav("SafetyPointButton1-v0", 76, button, {"langevin_steps": 50}),
-        nav("SafetyCarButton1-v0", 88, button, {"langevin_steps": 50}),
+        nav("SafetyPointGoal1-v0", 60, "hazards", "Goal"),
+        nav("SafetyCarGoal1-v0", 72, "hazards", "Goal"),
+        nav("SafetyPointButton1-v0", 76, button, "Button"),
+        nav("SafetyCarButton1-v0", 88, button, "Button"),
         vel("SafetyAntVelocity-v1", 27, 8, "1[sqrt(vx^2+vy^2) > 2.6222]"),
         vel("SafetySwimmerVelocity-v1", 8, 2, "1[vx > 0.2282]"),
         vel("SafetyHumanoidVelocity-v1", 376, 17, "1[sqrt(vx^2+vy^2) > 1.4149]"),
     ]
     for spec in expected:
         assert get_task(spec.id) == spec
+    # LAC's T = 50 on the Button tasks (Table 5), now its override for the family.
+    assert LACConfig().task("SafetyCarButton1-v0").langevin_steps == 50
+    assert LACConfig().task("SafetyCarGoal1-v0").langevin_steps == 30
 
 
 def test_every_navigation_and_velocity_task_is_registered():
@@ -280,7 +284,7 @@ def test_every_navigation_and_velocity_task_is_registered():
         assert (spec.cost_limit, spec.episode_cost_discount) == (25.0, 1.0)
         assert spec.preset == ("safety_gym" if nav else "mujoco")
         assert spec.kwargs == {"env_id": task_id}
-        assert spec.overrides == ({"langevin_steps": 50} if "Button" in task_id else {})
+        assert spec.family == (re.match(r"Safety[A-Z][a-z]+([A-Z][a-z]+)\d", task_id)[1] if nav else "")
         assert spec.cost_source.startswith("safety_gymnasium ")
         assert ("always 0" in spec.cost_source) == bool(re.search(r"(Goal|Button|Push|Circle)0-", task_id))
         assert safety_gym.episode_steps(task_id) == (500 if re.search(r"(Circle|Run)\d", task_id) else 1000)
@@ -339,7 +343,7 @@ def test_docs_tasks_md_lists_exactly_the_registered_ids():
         assert (int(obs), int(act), int(steps)) == (spec.obs_dim, spec.act_dim, safety_gym.episode_steps(task_id))
         assert float(limit) == spec.cost_limit
         assert preset.split("`")[1] == spec.preset
-        assert ("T = 50" in preset) == ("langevin_steps" in spec.overrides)
+        assert ("T = 50" in preset) == ("langevin_steps" in LACConfig.TASK_FAMILY_OVERRIDES.get(spec.family, {}))
 
 
 def test_new_navigation_tasks_step_and_cost():

@@ -25,8 +25,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.lac.energy import DTYPE_CHOICES as LANGEVIN_DTYPES
 from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
-from lac_rllib.algorithms.lac.networks import ACTIVATIONS
-from lac_rllib.constrained import fields
+from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
 from lac_rllib.constrained.cpus import check_cpus, run_resources, runner_cpus, set_runners, use_cpus  # noqa: F401
 from lac_rllib.constrained.fields import (
@@ -42,6 +41,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 CHAIN_AT = ("next", "current")
@@ -217,8 +217,12 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
     """
 
     PRESETS = PRESETS
-    #: The tasks' own overrides (TaskSpec.overrides, e.g. T = 50 on the Button tasks) are LAC's fields.
-    APPLY_TASK_OVERRIDES = True
+    #: Table 5 sets T = 50 Langevin steps on the Button1 tasks; we apply it to the whole Button
+    #: family (levels 0-2, TaskSpec.family), whose goal (press the one right button) is the same.
+    TASK_FAMILY_OVERRIDES = {"Button": {"langevin_steps": 50}}
+    REPORTED_KEYS = (metrics.CRITIC_LOSS, metrics.ACTOR_LOSS, metrics.ACTOR_NLL, metrics.ACTOR_KL,
+                     metrics.Q_REWARD_MEAN, metrics.Q_COST_MEAN, metrics.TARGET_REWARD_MEAN,
+                     metrics.TARGET_COST_MEAN, metrics.NU_MAX, *metrics.CHAIN_HEALTH_KEYS)
 
     def __init__(self, algo_class=None):
         from lac_rllib.algorithms.lac.algorithm import LAC
@@ -335,6 +339,33 @@ ACTIONS = ("generator", "langevin")
 
 #: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
 SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
+
+# A trial this short cannot repay a compile of the fused chain (~15-40 s per process): eager.
+_SMOKE = {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
+          "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1, "langevin_fused": False}
+#: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any other).
+#: quick on the tiny task is the default ablation's (docs/sweeps.md): T = 20, the fused chain (it
+#: pays there: a T = 30 trial runs ~1,400 chains of 30 steps, the compiled kernels cached on disk
+#: across trials) and ten envs per runner (RLlib's per-step machinery took 55% of a one-env trial,
+#: py-spy; ten 100-step episodes still complete in every 1,000-step iteration). On the paper's
+#: tasks quick is a machinery check: 64-wide nets, one env so 2k-step iterations complete
+#: 1000-step episodes.
+BUDGET_FIELDS = {
+    "smoke": {"*": _SMOKE},
+    "quick": {"tiny": {"langevin_steps": 20, "langevin_fused": True, "num_envs_per_env_runner": 10},
+              "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
+                    "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                    "num_envs_per_env_runner": 1, "langevin_fused": False}},
+}
+#: The chain's seconds per env step and per Langevin step on one CPU, per preset (the plan's
+#: estimate; calibration: docs/sweeps.md).
+CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
+
+
+def plan_update_s(params: dict, preset: str) -> float:
+    """Update seconds per env step on one CPU beyond sampling (the plan's estimate): the chain's
+    share, which grows with T."""
+    return CHAIN_S_PER_STEP.get(preset, 0.0) * params["langevin_steps"]
 
 
 

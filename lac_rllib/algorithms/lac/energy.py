@@ -32,8 +32,8 @@ import math
 
 import torch
 
-from lac_rllib.algorithms.lac import networks
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, cost_rows, reward_rows
+from lac_rllib.constrained import networks
+from lac_rllib.constrained.networks import CriticEnsemble, cost_rows, reward_rows
 
 DTYPES = ("float32", "bfloat16")
 #: What the ``langevin_dtype`` field accepts: a dtype, or "auto" (:func:`resolve_dtype`).

@@ -27,7 +27,7 @@ from typing import Callable
 import torch
 
 from lac_rllib.algorithms.lac.energy import DTYPES, eager_grad_fn, make_grad_fn
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, cost_rows, reward_rows
+from lac_rllib.constrained.networks import CriticEnsemble, cost_rows, reward_rows
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
 # Where a chain starts (the ``langevin_start`` field): ã_0 ~ π_φ'(·|s) (eq. 11), or N(0, I) (NI).

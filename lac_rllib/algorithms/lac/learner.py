@@ -24,7 +24,6 @@ from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac import module as M
-from lac_rllib.algorithms.lac.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.gradients import zero_non_finite_
 from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
@@ -48,6 +47,7 @@ from lac_rllib.constrained.metrics import (
     TS_ITERATION,
     TS_MEAN_EPISODE_COST,
 )
+from lac_rllib.constrained.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
 
 CRITIC, ACTOR = "critic", "actor"  # optimizer names, one per loss
 # Chain health is averaged over the last HEALTH_WINDOW minibatches, about one iteration (one pass

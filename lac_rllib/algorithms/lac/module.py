@@ -25,7 +25,7 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
+from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 
 # Keys of the forward_train output, declared once.
 Q_PRED = "q_pred"  # (E, B) online Q(s, a), rows [:n_reward] reward critics

@@ -25,7 +25,7 @@ from ray.rllib.connectors.learner import AddColumnsFromEpisodesToTrainBatch
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.constrained import fields
+from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.costs import AddCostsFromInfos
 from lac_rllib.constrained.fields import (
     BOOL,
@@ -173,6 +173,7 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
     """
 
     PRESETS = PRESETS
+    REPORTED_KEYS = metrics.PPO_LAG_KEYS
 
     def __init__(self, algo_class=None):
         from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
@@ -270,6 +271,21 @@ CONFIG_CLASS, PARAMS = PPOLagConfig, PPOLagParams
 ACTIONS = ("generator",)
 #: Fields that set how fast a run goes, not what it learns.
 SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads"})
+#: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any
+#: other): smoke at LAC's smoke sizes; quick on the paper's tasks 64-wide nets, one env, 2k-step
+#: iterations as LAC's (on the tiny task its own tiny preset is the quick budget).
+BUDGET_FIELDS = {
+    "smoke": {"*": {"train_batch_size_per_learner": 500, "minibatch_size": 100, "num_epochs": 2, "hidden": (32, 32),
+                    "num_envs_per_env_runner": 1}},
+    "quick": {"tiny": {}, "*": {"train_batch_size_per_learner": 2_000, "hidden": (64, 64),
+                                "num_envs_per_env_runner": 1}},
+}
+
+
+def plan_update_s(params: dict, preset: str) -> float:
+    """Update seconds per env step on one CPU beyond sampling (the plan's estimate, measured at the
+    tiny sizes)."""
+    return 2e-4
 
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,

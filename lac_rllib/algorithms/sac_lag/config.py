@@ -22,8 +22,7 @@ from ray.rllib.connectors.learner import (
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.lac.networks import ACTIVATIONS
-from lac_rllib.constrained import fields
+from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
 from lac_rllib.constrained.cpus import set_runners
 from lac_rllib.constrained.fields import (
@@ -39,6 +38,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 LAGRANGIAN_RULES = ("adam", "gradient")
@@ -153,6 +153,8 @@ class SACLagConfig(SafeTaskConfig, AlgorithmConfig):
     task's preset; explicit ``training(...)`` values win over the preset."""
 
     PRESETS = PRESETS
+    REPORTED_KEYS = (metrics.CRITIC_LOSS, metrics.ACTOR_LOSS, metrics.Q_REWARD_MEAN, metrics.Q_COST_MEAN,
+                     metrics.COST_WINDOW_MEAN)
 
     def __init__(self, algo_class=None):
         from lac_rllib.algorithms.sac_lag.algorithm import SACLag
@@ -241,6 +243,23 @@ CONFIG_CLASS, PARAMS = SACLagConfig, SACLagParams
 ACTIONS = ("generator",)
 #: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
 SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads"})
+#: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any
+#: other): smoke at LAC's smoke sizes; quick on the paper's tasks 64-wide nets, one env, 2k-step
+#: iterations as LAC's (on the tiny task its own tiny preset is the quick budget).
+BUDGET_FIELDS = {
+    "smoke": {"*": {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_env_steps": 500,
+                    "warmup_env_steps": 500, "actor_hidden": (32, 32), "critic_hidden": (32, 32),
+                    "num_envs_per_env_runner": 1}},
+    "quick": {"tiny": {}, "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000,
+                                "random_env_steps": 2_000, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                                "num_envs_per_env_runner": 1}},
+}
+
+
+def plan_update_s(params: dict, preset: str) -> float:
+    """Update seconds per env step on one CPU beyond sampling (the plan's estimate, measured at the
+    tiny sizes): per gradient update, times the updates per env step."""
+    return 2e-3 * params.get("updates_per_env_step", 1.0)
 
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,

@@ -25,8 +25,8 @@ from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.lac.networks import CriticEnsemble
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
+from lac_rllib.constrained.networks import CriticEnsemble
 
 # Keys of the forward outputs, declared once.
 Q_REWARD = "q_reward"  # (2, B) Q_R1, Q_R2 at (s, a)

@@ -1,7 +1,7 @@
 """SAC-Lag's actor, OmniSafe's ``GaussianSACActor``: a tanh-squashed Gaussian with a state-dependent
 log σ, and the RLlib action distribution that acts with it on the env runners.
 
-The critics are LAC's :class:`~lac_rllib.algorithms.lac.networks.CriticEnsemble` (ReLU, one
+The critics are LAC's :class:`~lac_rllib.constrained.networks.CriticEnsemble` (ReLU, one
 ensemble for the two reward critics and one for the cost critic); nothing here is new about them.
 """
 
@@ -14,7 +14,7 @@ import torch.nn.functional as F
 from ray.rllib.core.distribution.torch.torch_distribution import TorchDeterministic, TorchSquashedGaussian
 from torch import nn
 
-from lac_rllib.algorithms.lac.networks import gaussian_log_prob, mlp
+from lac_rllib.constrained.networks import gaussian_log_prob, mlp
 
 
 class SquashedGaussianActor(nn.Module):

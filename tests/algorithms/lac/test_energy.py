@@ -10,7 +10,7 @@ import torch
 from conftest import chain
 
 from lac_rllib.algorithms.lac import energy as energy_module
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
+from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 
 ETA = 1e-4
 

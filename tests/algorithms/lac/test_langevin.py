@@ -10,7 +10,7 @@ import torch
 from conftest import chain
 
 from lac_rllib.algorithms.lac.langevin import INFORMATIVE, STARTS, naive_langevin_chain, run_chain
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor
+from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 
 D64 = torch.float64
 M_STRONG, L_SMOOTH = 1.0, 4.0  # m I ⪯ ∇²E ⪯ l I

@@ -7,7 +7,7 @@ import pytest
 import torch
 from torch import nn
 
-from lac_rllib.algorithms.lac.networks import (
+from lac_rllib.constrained.networks import (
     CriticEnsemble,
     GaussianActor,
     cost_rows,

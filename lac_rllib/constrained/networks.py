@@ -1,4 +1,5 @@
-"""Plain-torch networks for LAC (docs/spec.md §3): the Gaussian generator actor and the critic ensemble.
+"""Plain-torch networks the algorithms build from (docs/spec.md §3): LAC's Gaussian generator actor,
+the Gaussian log-density and KL, the MLP builder and the critic ensemble (SAC-Lag's critics too).
 
 The critic ensemble exists for the Langevin chain (docs/spec.md §1): the chain needs ∇_a of up to four
 critics at every one of its T steps, so the critics are stored as one batched ensemble (one

@@ -1,0 +1,20 @@
+"""How an error line quotes a bad value: a short, cut ``repr`` (:func:`excerpt`).
+
+Values reach the checks from sweep files, flags and users' envs, and may be huge (an alias tree, a
+list of a million numbers, an exception's text): an error line never prints the whole of one.
+Plain Python, importable from every layer (the tasks' registry included).
+"""
+
+from __future__ import annotations
+
+import reprlib
+from typing import Any
+
+_REPR = reprlib.Repr()  # Python 3.11's takes no keywords
+_REPR.maxstring, _REPR.maxother, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxlevel = 40, 40, 4, 4, 3, 2
+
+
+def excerpt(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to at most ``limit`` characters (containers to their first items)."""
+    text = _REPR.repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
