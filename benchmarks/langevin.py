@@ -28,7 +28,7 @@ import time
 import torch
 
 from lac_rllib.algorithms.lac.langevin import ChainSettings, langevin_chain, naive_langevin_chain
-from lac_rllib.algorithms.lac.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows
+from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor, cost_rows, reward_rows
 
 TASK_DIMS = {"PointGoal1": (60, 2), "Humanoid": (376, 17)}
 CHAIN = dict(steps=30, step_size=1e-4, temperature=1e-3, nu=0.5)
@@ -161,8 +161,8 @@ def _gradient_step_case(obs_dim: int, act_dim: int, steps: int) -> dict:
     from lac_rllib.algorithms.lac import module as M
     from lac_rllib.algorithms.lac.config import LACConfig
     from lac_rllib.algorithms.lac.learner import critic_targets
-    from lac_rllib.algorithms.lac.networks import gaussian_kl, gaussian_log_prob
     from lac_rllib.constrained.costs import COSTS
+    from lac_rllib.constrained.networks import gaussian_kl, gaussian_log_prob
 
     obs_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
     act_space = gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32)
