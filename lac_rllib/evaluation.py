@@ -13,7 +13,7 @@ this process, without ``ray.init``:
   ``MeanStdFilter`` (running mean/std + clip, docs/spec.md §5) is swapped for a frozen twin
   (``update_stats=False``) holding the same state, so evaluation never moves the statistics;
 * the task id and the LAC config fields from the checkpoint's ``rllib_checkpoint.json``,
-  which ``SafeAlgorithm.get_metadata`` fills (``checkpoint_format`` 2). The lac-rllib major.minor
+  which ``SafeAlgorithm.get_metadata`` fills (``checkpoint_format`` 3; format 2 is read too). The lac-rllib major.minor
   version and the format must match the installed ones.
 
 ``evaluate(policy, episodes, seed, actions=...)`` runs ``episodes`` episodes, episode ``i``
@@ -47,8 +47,10 @@ import torch
 
 from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 
-#: The ``checkpoint_format`` this module reads (lac_rllib.constrained.algorithm writes it).
+#: The ``checkpoint_format`` this module reads (lac_rllib.constrained.algorithm writes it), and the
+#: older formats it still reads, each with the keys renamed since (old name → current name).
 SUPPORTED_CHECKPOINT_FORMAT = CHECKPOINT_FORMAT
+OLDER_FORMATS = {2: {"lac_config": "algo_config"}}
 ACTION_MODES = ("generator", "langevin")
 #: The RLlib algorithm checkpoint's metadata file (``Algorithm.METADATA_FILE_NAME``).
 ALGO_METADATA_FILE = "rllib_checkpoint.json"
@@ -68,7 +70,7 @@ class Policy:
     env_to_module: Any            # EnvToModulePipeline (its MeanStdFilter frozen)
     obs_filter: Any               # the frozen MeanStdFilter, or None (obs_normalization off)
     task_id: str
-    lac_config: dict              # the algorithm's fields as saved (LACParams for LAC)
+    algo_config: dict             # the algorithm's fields as saved (LACParams for LAC)
     cost_limit: float             # b in force for the run
     episode_cost_discount: float  # 1.0 = summed episode cost, < 1 = discounted
     env_config: dict
@@ -153,16 +155,20 @@ def read_metadata(checkpoint_dir: str) -> dict:
             f"not a lac-rllib checkpoint: {file} has no lac_rllib_version/checkpoint_format "
             "(written by another algorithm, or by lac-rllib before checkpoint format 1)")
     fmt, saved, installed = meta["checkpoint_format"], str(meta["lac_rllib_version"]), _installed_version()
-    if fmt != SUPPORTED_CHECKPOINT_FORMAT:
+    if fmt != SUPPORTED_CHECKPOINT_FORMAT and fmt not in OLDER_FORMATS:
+        readable = " and ".join(map(str, (SUPPORTED_CHECKPOINT_FORMAT, *OLDER_FORMATS)))
         raise CheckpointError(
-            f"unsupported checkpoint format {fmt!r} in {file}: this lac-rllib {installed} reads "
-            f"format {SUPPORTED_CHECKPOINT_FORMAT}")
+            f"unsupported checkpoint format {fmt!r} in {file} (written by lac-rllib {saved}): this lac-rllib "
+            f"{installed} reads formats {readable}")
+    for old, new in OLDER_FORMATS.get(fmt, {}).items():
+        if old in meta:
+            meta[new] = meta.pop(old)
     if _major_minor(saved) != _major_minor(installed):
         raise CheckpointError(
             f"checkpoint version mismatch: written by lac-rllib {saved}, installed lac-rllib is "
             f"{installed} (major.minor must match; evaluate it with lac-rllib "
             f"{'.'.join(_major_minor(saved))}.x)")
-    for key in ("task_id", "lac_config", "cost_limit", "episode_cost_discount"):
+    for key in ("task_id", "algo_config", "cost_limit", "episode_cost_discount"):
         if key not in meta:
             raise CheckpointError(f"corrupt checkpoint: {file} lacks the {key!r} entry")
     return meta
@@ -262,11 +268,11 @@ def restore_policy(checkpoint_path: str) -> Policy:
         ckpt, COMPONENT_LEARNER_GROUP, COMPONENT_LEARNER, COMPONENT_RL_MODULE, DEFAULT_MODULE_ID))
     pipeline, obs_filter = _restore_env_to_module(
         os.path.join(ckpt, COMPONENT_ENV_RUNNER, COMPONENT_ENV_TO_MODULE_CONNECTOR))
-    if meta["lac_config"].get("obs_normalization", True) and obs_filter is None:
+    if meta["algo_config"].get("obs_normalization", True) and obs_filter is None:
         raise CheckpointError(f"corrupt checkpoint: obs_normalization is on but {ckpt} holds no MeanStdFilter state")
     return Policy(
         module=module, env_to_module=pipeline, obs_filter=obs_filter, task_id=meta["task_id"],
-        lac_config=dict(meta["lac_config"]), cost_limit=float(meta["cost_limit"]),
+        algo_config=dict(meta["algo_config"]), cost_limit=float(meta["cost_limit"]),
         episode_cost_discount=float(meta["episode_cost_discount"]),
         env_config=dict(meta.get("env_config") or {}), checkpoint_path=ckpt, metadata=meta,
     )
@@ -430,8 +436,8 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
     if langevin_step_size is not None and not (math.isfinite(langevin_step_size) and langevin_step_size > 0):
         raise ValueError(f"langevin_step_size={langevin_step_size!r} is invalid; accepted: a number > 0")
     if actions == "langevin":
-        steps = langevin_steps or int(policy.lac_config["langevin_steps"])
-        step_size = langevin_step_size or float(policy.lac_config["langevin_step_size"])
+        steps = langevin_steps or int(policy.algo_config["langevin_steps"])
+        step_size = langevin_step_size or float(policy.algo_config["langevin_step_size"])
 
     module, gamma_c = policy.module, policy.episode_cost_discount
     low, high = policy.action_low, policy.action_high

@@ -42,7 +42,8 @@ import tempfile
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO
 
-PROG = "evaluate"
+#: The command's name in its help and errors: the console script, or "evaluate" (python sweeps/evaluate.py).
+PROG = "lac-eval" if os.path.basename(sys.argv[0]) == "lac-eval" else "evaluate"
 EVAL_PREFIX = "eval"
 # The tag names (CHECKPOINT_TAG, SWEEP_TAG, PARENT_TAG) live in sweeps.tracking; it imports
 # mlflow (seconds), so it is imported only when --run-id / --best-of need it.

@@ -41,8 +41,8 @@ LABEL_CHARS = 32  # a label longer than this is cut (a search's label lists ever
 
 
 def _num(points: pd.DataFrame, col: str) -> np.ndarray:
-    return pd.to_numeric(points[col], errors="coerce").to_numpy(float) if col in points else \
-        np.full(len(points), np.nan)
+    return (pd.to_numeric(points[col], errors="coerce").to_numpy(float) if col in points
+            else np.full(len(points), np.nan))
 
 
 def _non_dominated(ret: np.ndarray, cost: np.ndarray) -> np.ndarray:

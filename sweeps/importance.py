@@ -219,8 +219,8 @@ def importance_line(imp: dict, k: int = 3) -> str:
     parts = [f"{name}: " + ", ".join(f"`{f}` {v:.2f}" for f, v in top_fields(imp[name], k))
              for name in OBJECTIVES if imp.get(name)]
     why = getattr(imp, "reason", "")
-    text = ("**Hyperparameter importance** (fANOVA over configurations): " + "; ".join(parts)) if parts else \
-        "**Hyperparameter importance:** none"
+    text = ("**Hyperparameter importance** (fANOVA over configurations): " + "; ".join(parts) if parts
+            else "**Hyperparameter importance:** none")
     return text + (f" ({why})" if why else "")
 
 

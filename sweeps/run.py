@@ -32,6 +32,8 @@ from sweeps.tracking import check_reachable, default_tracking_uri
 # update's seconds per env step (``plan_update_s`` in its folder, read through the registry).
 RATE = {"tiny": 405.0, "safety_gym": 377.0, "mujoco": 185.0}
 STARTUP_S = 15.0
+#: The command's name in its help and errors: the console script, or the file as ``python`` ran it.
+PROG = "lac-sweep" if Path(sys.argv[0]).name == "lac-sweep" else "sweeps/run.py"
 #: The most trials a sweep may plan unless --max-trials says more: counted before any is built
 #: (the plan holds each trial's resolved fields; ~10 ms and a few KB each).
 MAX_TRIALS = 5_000
@@ -71,7 +73,7 @@ def _budget(text: str) -> str | int:
 
 def parse_args(argv=None) -> argparse.Namespace:
     """The command line. A flag left out is None: the sweep file (or its default) decides."""
-    p = argparse.ArgumentParser(prog="sweeps/run.py", description=__doc__,
+    p = argparse.ArgumentParser(prog=PROG, description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--space", choices=sweep_file.builtin_spaces(),
@@ -314,8 +316,8 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
         raise ValueError(sweep_file.first_error(e, origin)) from None
     if args.name or not sweep.name:
         tasks = sweep.task
-        what = (tasks[0] if isinstance(tasks[0], str) else tasks[0].task_id()).split("/")[-1] \
-            if len(tasks) == 1 else f"{len(tasks)}-tasks"
+        what = ((tasks[0] if isinstance(tasks[0], str) else tasks[0].task_id()).split("/")[-1]
+                if len(tasks) == 1 else f"{len(tasks)}-tasks")
         # Derived from the file's stem and the task: made safe rather than refused (it becomes a path).
         sweep = sweep.model_copy(update={"name": args.name or sweep_file.safe_name(f"{space}-{what}-{sweep.budget}")})
     return sweep, space, origin
@@ -502,7 +504,7 @@ def main(argv=None) -> int:
         if not args.resume and started:
             raise ValueError(f"a sweep named {plan.name!r} exists under {plan.storage}; pass --resume or --name")
     except ValueError as e:
-        print(f"sweeps/run.py: error: {one_line(str(e))}", file=sys.stderr)
+        print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
     lock = None
     if "://" not in plan.storage:  # object stores have no atomic create (sweeps/lock.py)
@@ -510,7 +512,7 @@ def main(argv=None) -> int:
         try:
             lock.acquire()
         except SweepLocked as e:
-            print(f"sweeps/run.py: error: {e}", file=sys.stderr)
+            print(f"{PROG}: error: {e}", file=sys.stderr)
             return 2
     else:
         print(f"note: no driver lock on {plan.storage}: do not run this sweep from two drivers at once",

@@ -29,7 +29,7 @@ from sweeps.tracking import (
     STOPPED_TAG,
     SweepTracker,
 )
-from sweeps.trainable import CONSTRAINT, OBJECTIVE, LACTrainable, objective
+from sweeps.trainable import CONSTRAINT, OBJECTIVE, SweepTrial, objective
 
 METRIC, MODE = OBJECTIVE, "max"
 MULTI_OBJECTIVES = (EPISODE_RETURN, EPISODE_COST)  # a multi-objective search's, maximised and minimised
@@ -204,7 +204,7 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
     first start failed before Tune wrote anything)."""
     # A multi-CPU trial reserves a bundle per env runner, where RLlib places them (config.run_resources).
     sweep, infra = plan.sweep, plan.infra
-    trainable = tune.with_resources(LACTrainable, run_resources(sweep.cpus_per_trial))
+    trainable = tune.with_resources(SweepTrial, run_resources(sweep.cpus_per_trial))
     if infra.resume and tune.Tuner.can_restore(str(sweep_dir)):
         return tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True, resume_errored=False)
     failure = tune.FailureConfig(max_failures=infra.max_failures)

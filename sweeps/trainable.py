@@ -1,4 +1,4 @@
-"""LACTrainable: one sweep trial = one run of LAC or a baseline inside a Tune trial, tracked in its
+"""SweepTrial: one sweep trial = one run of LAC or a baseline inside a Tune trial, tracked in its
 MLflow child run.
 
 Tune owns scheduling, checkpoints (``save_checkpoint`` writes the RLlib checkpoint), restore and
@@ -68,7 +68,7 @@ def objective(ret: float, cost: float, limit: float) -> float:
     return ret if cost <= limit else -INFEASIBLE_OFFSET - (cost - limit)
 
 
-class LACTrainable(tune.Trainable):
+class SweepTrial(tune.Trainable):
     """One trial. config: ``trial`` (a grid trial's TrialSpec, its fields resolved at plan time)
     or, for a search, ``task``, ``budget``, ``sets``, ``seeds`` and the sampled ``overrides``
     (spaces.trial_spec makes both a TrialSpec); ``timesteps``, ``cpus``, ``user_tasks`` (a user env's
@@ -83,22 +83,22 @@ class LACTrainable(tune.Trainable):
         # runners and torch threads: lac_rllib.algorithms.lac.config.use_cpus).
         cpus = int(config.get("cpus", 1))  # a trial's torch threads are its CPUs, whatever --set says
         algo, fields = split_algo(spec.params)
-        self.lac_config = build_config(algo, spec.task, spec.seed, {**fields, "torch_threads": cpus},
+        self.algo_config = build_config(algo, spec.task, spec.seed, {**fields, "torch_threads": cpus},
                                        timesteps=self.timesteps, cpus=cpus)
-        self.algo = self.lac_config.build_algo()
+        self.algo = self.algo_config.build_algo()
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
                                     spec.label())
-        task = self.lac_config.task_spec
+        task = self.algo_config.task_spec
         user = task.factory == USER_FACTORY
         source = task.kwargs.get("factory") or task.kwargs.get("gym_id") if user else task.factory
         params = {P_TASK: spec.task, P_TASK_SOURCE: source, P_SEED: spec.seed, P_GROUP: spec.group,
                   P_SWEPT_PARAM: spec.param, P_SWEPT_VALUE: spec.value, P_TIMESTEPS: self.timesteps, P_ALGO: algo,
-                  **self.lac_config.params()}
+                  **self.algo_config.params()}
         tags = {NODE_TAG: ray.get_runtime_context().get_node_id(), "lac.host": socket.gethostname(),
                 "lac.tune_trial_name": self.trial_name, "lac.group": spec.group,
                 # MLflow's UI groups runs by a tag and averages their curves: one group per configuration.
-                CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, {P_ALGO: algo, **self.lac_config.params()}),
+                CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, {P_ALGO: algo, **self.algo_config.params()}),
                 ALGO_TAG: algo,
                 CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if spec.default else "0"}
         self.tracker.open(params, tags)
@@ -113,8 +113,8 @@ class LACTrainable(tune.Trainable):
             self.tracker.set_tags({"lac.resumed_after_env_steps": self.logged_up_to})
         # The node of the latest (re)start, and what rule-valued fields ("auto") resolved to there.
         self.tracker.set_tags({NODE_TAG: tags[NODE_TAG],
-                               **{f"{RESOLVED_TAG_PREFIX}{k}": v for k, v in self.lac_config.resolved().items()}})
-        self.tracker.log_text(json.dumps({**params, COST_LIMIT: self.lac_config.effective_cost_limit},
+                               **{f"{RESOLVED_TAG_PREFIX}{k}": v for k, v in self.algo_config.resolved().items()}})
+        self.tracker.log_text(json.dumps({**params, COST_LIMIT: self.algo_config.effective_cost_limit},
                                          indent=2, default=str), "config.json")
 
     def step(self) -> dict:
@@ -155,7 +155,7 @@ class LACTrainable(tune.Trainable):
             # checks one against the other (sweeps/integrity.py).
             self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
             self.tracker.log_artifacts(os.path.join(tmp, "checkpoint"), "checkpoint")
-            curve = learning_curve(self.tracker.client, self.tracker.run_id, self.lac_config.effective_cost_limit)
+            curve = learning_curve(self.tracker.client, self.tracker.run_id, self.algo_config.effective_cost_limit)
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint"})
@@ -170,3 +170,8 @@ class LACTrainable(tune.Trainable):
     def cleanup(self) -> None:
         self.tracker.flush()
         self.algo.stop()
+
+
+#: The name this class had before 0.3: a Tune experiment state written then names it, and a
+#: ``--resume`` of such a sweep finds it here.
+LACTrainable = SweepTrial

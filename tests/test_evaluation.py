@@ -50,18 +50,18 @@ def test_checkpoint_metadata_written_by_lac(checkpoint):
 
     meta = json.loads(open(os.path.join(checkpoint, "rllib_checkpoint.json")).read())
     assert meta["lac_rllib_version"] == version("lac-rllib")
-    assert meta["checkpoint_format"] == 2
+    assert meta["checkpoint_format"] == 3
     assert meta["task_id"] == TASK
     assert meta["cost_limit"] == 2.0 and meta["episode_cost_discount"] == 1.0
-    assert meta["lac_config"]["env_steps_per_iteration"] == 500
-    assert meta["lac_config"]["actor_hidden"] == [64, 64]  # tiny preset, JSON list
+    assert meta["algo_config"]["env_steps_per_iteration"] == 500
+    assert meta["algo_config"]["actor_hidden"] == [64, 64]  # tiny preset, JSON list
     assert meta["checkpoint_version"] == "2.1"  # RLlib's own keys are kept
 
 
 def test_restore_gives_full_module_and_frozen_filter(policy, checkpoint):
     m = policy.module
     assert policy.task_id == TASK and policy.cost_limit == 2.0 and policy.episode_cost_discount == 1.0
-    assert policy.lac_config["replay_capacity"] == 2000
+    assert policy.algo_config["replay_capacity"] == 2000
     assert not m.inference_only and hasattr(m, "critics") and hasattr(m, "target_actor")
     # Every tensor equals the learner's saved module state, target networks and ν included.
     saved = pickle.load(open(os.path.join(
@@ -216,8 +216,19 @@ def test_patch_version_difference_is_accepted(ckpt_copy):
 
 def test_format_mismatch(ckpt_copy):
     _edit_metadata(ckpt_copy, checkpoint_format=1)
-    with pytest.raises(CheckpointError, match="unsupported checkpoint format 1 .* reads format 2"):
+    with pytest.raises(CheckpointError, match=r"unsupported checkpoint format 1 .*\(written by lac-rllib "
+                                              r"[\d.]+\): this lac-rllib .* reads formats 3 and 2"):
         restore_policy(str(ckpt_copy))
+
+
+def test_a_format_2_checkpoint_restores_with_its_old_key(ckpt_copy):
+    """Format 2 (before the rename) kept the algorithm's fields under ``lac_config``."""
+    file = ckpt_copy / "rllib_checkpoint.json"
+    meta = json.loads(file.read_text())
+    fields = meta.pop("algo_config")
+    file.write_text(json.dumps({**meta, "checkpoint_format": 2, "lac_config": fields}))
+    policy = restore_policy(str(ckpt_copy))
+    assert policy.algo_config == fields and policy.task_id == TASK
 
 
 def test_not_a_lac_checkpoint(ckpt_copy):

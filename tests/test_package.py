@@ -41,7 +41,7 @@ def test_console_scripts_answer_help(script):
     exe = shutil.which(script, path=str(Path(sys.executable).parent))
     assert exe, f"{script} is not installed beside {sys.executable}"
     out = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0 and "usage:" in out.stdout, out.stderr[-500:]
+    assert out.returncode == 0 and out.stdout.startswith(f"usage: {script} "), out.stdout[:200] + out.stderr[-500:]
 
 
 def test_no_sys_path_edits_in_package_code():

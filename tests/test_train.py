@@ -128,7 +128,7 @@ def _fake_checkpoint(path, config):
     (path / "checkpoint").mkdir()
     (path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({
         "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
-        "lac_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
+        "algo_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
 
 
 def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path, monkeypatch):

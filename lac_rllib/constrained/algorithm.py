@@ -32,8 +32,9 @@ from lac_rllib.constrained.task_config import register_task_env
 from lac_rllib.tasks import user as user_tasks
 
 #: Version of the lac-rllib keys in a checkpoint's rllib_checkpoint.json (lac_rllib.evaluation reads
-#: this one only). 2: the classes moved to lac_rllib.algorithms / lac_rllib.constrained (0.2.0).
-CHECKPOINT_FORMAT = 2
+#: this one and format 2). 2: the classes moved to lac_rllib.algorithms / lac_rllib.constrained
+#: (0.2.0); 3: the algorithm's fields under ``algo_config`` (format 2 called them ``lac_config``).
+CHECKPOINT_FORMAT = 3
 
 
 def resume_seed(seed: int, iteration: int) -> int:
@@ -69,7 +70,7 @@ class SafeAlgorithm(Algorithm):
             "seed": cfg.seed,
             "cost_limit": cfg.effective_cost_limit,
             "episode_cost_discount": cfg.effective_episode_cost_discount,
-            "lac_config": cfg.params(),  # the algorithm's fields (the key name predates the baselines)
+            "algo_config": cfg.params(),  # the algorithm's fields
             "resolved": cfg.resolved(),  # what rule-valued fields ("auto") ran as on the learner's machine
         }
         if cfg.task_spec is not None and cfg.task_spec.factory == user_tasks.FACTORY:

@@ -101,8 +101,8 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
 
         ``mean``/``log_std`` are π_φ'(·|obs); ``steps``/``step_size`` override T and η.
         """
-        settings = self.chain_settings if steps is None and step_size is None else \
-            self.chain_settings.with_steps(steps, step_size)
+        settings = (self.chain_settings if steps is None and step_size is None
+                    else self.chain_settings.with_steps(steps, step_size))
         return langevin_chain(self.critics, obs, mean, log_std, self.nu, settings, generator=generator)
 
     # ----- RLlib APIs -----

@@ -95,7 +95,7 @@ def test_checkpoint_round_trip_keeps_nu_its_adam_state_and_the_cost_window(ray_s
         with open(os.path.join(path, "rllib_checkpoint.json")) as f:
             meta = json.load(f)
         assert meta["algo"] == "ppo_lag" and meta["task_id"] == "lac/PointHazard-v0" and meta["cost_limit"] == 5.0
-        assert meta["lac_config"]["nu_init"] == 0.5 and meta["lac_config"]["preset"] == "tiny"
+        assert meta["algo_config"]["nu_init"] == 0.5 and meta["algo_config"]["preset"] == "tiny"
         # Evaluation restores the learner's full module without Ray; it acts like the trained one.
         module = RLModule.from_checkpoint(os.path.join(path, "learner_group", "learner", "rl_module",
                                                        DEFAULT_MODULE_ID))
