@@ -22,6 +22,7 @@ from ray.rllib.core.learner.torch.torch_learner import TorchLearner
 from ray.rllib.core.learner.utils import update_target_network
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.annotations import override
+from ray.rllib.utils.torch_utils import clip_gradients  # what TorchLearner._get_clip_function returns
 
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.constrained.costs import COSTS
@@ -177,7 +178,7 @@ class LACTorchLearner(TorchLearner):
         grads = dict(module_gradients_dict)
         if config.actor_grad_clip:  # [C] clips the actor only (norm 40)
             actor_grads = self.filter_param_dict_for_optimizer(grads, self.get_optimizer(module_id, ACTOR))
-            self._get_clip_function()(actor_grads, grad_clip=config.actor_grad_clip, grad_clip_by="global_norm")
+            clip_gradients(actor_grads, grad_clip=config.actor_grad_clip, grad_clip_by="global_norm")
             grads.update(actor_grads)
         return grads
 
