@@ -28,7 +28,8 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO
-from sweeps.report import _fmt_value, _is_na  # noqa: E402
+from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
+from sweeps.configurations import is_na as _is_na  # noqa: E402
 
 LAC = DEFAULT_ALGO  # the project's algorithm (the registry's default)
 LAC_COLOUR = "tab:blue"

@@ -49,7 +49,9 @@ import pandas as pd  # noqa: E402
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution  # noqa: E402
 
 from lac_rllib.constrained.metrics import EPISODE_COST, EPISODE_RETURN  # noqa: E402
-from sweeps.report import KEYS, _is_na, _prepared  # noqa: E402
+from sweeps.configurations import KEYS  # noqa: E402
+from sweeps.configurations import is_na as _is_na  # noqa: E402
+from sweeps.configurations import prepared as _prepared  # noqa: E402
 
 SEED = 0  # fANOVA's forest is seeded: the same sweep gives the same importances
 MIN_CONFIGURATIONS = 5

@@ -29,56 +29,23 @@ import pandas as pd  # noqa: E402
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE  # noqa: E402
+from sweeps.configurations import KEYS  # noqa: E402
+from sweeps.configurations import ci as _ci  # noqa: E402
+from sweeps.configurations import fmt_num as _fmt_num  # noqa: E402
+from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
+from sweeps.configurations import is_na as _is_na  # noqa: E402
+from sweeps.configurations import prepared as _prepared  # noqa: E402
+from sweeps.configurations import value_key as _value_key  # noqa: E402
 from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 
-KEYS = ["group", "param", "value", "task", "config"]
 STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
          "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean", "is_default",
          *STAT_COLUMNS]
 
 
-def _is_na(v) -> bool:
-    return v is None or (pd.api.types.is_scalar(v) and bool(pd.isna(v)))
-
-
-def _value_key(v) -> tuple:
-    """Sort key: numeric values first (numerically), then strings, then missing."""
-    if _is_na(v):
-        return (2, 0.0, "")
-    try:
-        return (0, float(v), "")
-    except (TypeError, ValueError):
-        return (1, 0.0, str(v))
-
-
-def _fmt_value(v) -> str:
-    """Display form of a swept value: 30.0 -> "30", missing -> "–"."""
-    if _is_na(v):
-        return "–"
-    return str(int(v)) if isinstance(v, (float, np.floating)) and float(v).is_integer() else str(v)
-
-
-def _fmt_num(x) -> str:
-    return "–" if _is_na(x) else f"{float(x):.2f}"
-
-
 def _pm(mean, std) -> str:
     """Mean ± std; the std shows "–" when undefined (one seed), all "–" without finished seeds."""
     return "–" if _is_na(mean) else f"{_fmt_num(mean)} ± {_fmt_num(std)}"
-
-
-def _prepared(trials: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
-    """Copy of ``trials`` with a clean ``param`` column, and the boolean mask of failed trials."""
-    df = trials.copy()
-    df["param"] = df["param"].fillna("").astype(str)
-    # "config": the configuration without its seed (lac.config; a search's samples share group,
-    # param and value); "default": the trial runs LAC's defaults, the baseline of the comparisons.
-    df["config"] = df["config"].fillna("").astype(str) if "config" in df else ""
-    df["default"] = df["default"].fillna(False).astype(bool) if "default" in df else False
-    failed = df["status"].astype(str).eq("ERROR")
-    for col in (EPISODE_RETURN, EPISODE_COST):
-        failed |= pd.to_numeric(df[col], errors="coerce").isna()
-    return df, failed
 
 
 def summarize(trials: pd.DataFrame) -> pd.DataFrame:
@@ -122,13 +89,6 @@ def _describe(cfg: dict) -> str:
     return (f"{what} on {cfg['task']}: return {_pm(cfg['return_mean'], cfg['return_std'])}, cost "
             f"{_pm(cfg['cost_mean'], cfg['cost_std'])} (limit {_fmt_num(cfg['cost_limit'])}), "
             f"{cfg['n_seeds']} seeds")
-
-
-def _ci(point, lo, hi) -> str:
-    """"2.19 [1.10, 3.05]"; the interval shows "–" when undefined (fewer than 2 seeds)."""
-    if _is_na(point):
-        return "–"
-    return f"{_fmt_num(point)} [{_fmt_num(lo)}, {_fmt_num(hi)}]" if not _is_na(lo) else f"{_fmt_num(point)} [–]"
 
 
 def _poi(x) -> str:

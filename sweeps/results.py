@@ -21,6 +21,7 @@ from lac_rllib.constrained.metrics import (
     LANGEVIN_AT_BOUND,
     LANGEVIN_CLIP_FRACTION,
 )
+from sweeps.objective import OBJECTIVE
 from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
@@ -36,7 +37,6 @@ from sweeps.tracking import (
     SweepTracker,
     learning_curve,
 )
-from sweeps.trainable import OBJECTIVE
 
 #: Where Optuna 5's ``trial.set_constraint`` keeps the constraint the sweep hands it (sweeps/sweep.py).
 OPTUNA_CONSTRAINT_KEY = "constraints:episode_cost_minus_limit"

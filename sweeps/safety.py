@@ -26,7 +26,9 @@ import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST
-from sweeps.report import KEYS, _prepared, _value_key
+from sweeps.configurations import KEYS
+from sweeps.configurations import prepared as _prepared
+from sweeps.configurations import value_key as _value_key
 
 CONFIDENCE = 0.95
 SAFETY_COLUMNS = ["n_seeds", "n_feasible", "p_feasible", "p_feasible_low", "p_feasible_high", "violation_total",

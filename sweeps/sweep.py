@@ -21,6 +21,7 @@ from lac_rllib.constrained.cpus import run_resources
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN
 from sweeps import spaces
 from sweeps.live_table import LiveTable
+from sweeps.objective import CONSTRAINT, OBJECTIVE, objective
 from sweeps.plan import Plan
 from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
 from sweeps.results import close_sweep
@@ -29,7 +30,7 @@ from sweeps.tracking import (
     STOPPED_TAG,
     SweepTracker,
 )
-from sweeps.trainable import CONSTRAINT, OBJECTIVE, SweepTrial, objective
+from sweeps.trainable import SweepTrial
 
 METRIC, MODE = OBJECTIVE, "max"
 MULTI_OBJECTIVES = (EPISODE_RETURN, EPISODE_COST)  # a multi-objective search's, maximised and minimised

@@ -9,7 +9,6 @@ NaN is marked FAILED in MLflow with the error before Tune marks it ERROR.
 from __future__ import annotations
 
 import json
-import math
 import os
 import socket
 import tempfile
@@ -33,6 +32,7 @@ from lac_rllib.tasks.user import FACTORY as USER_FACTORY
 from lac_rllib.tasks.user import register_definition
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
+from sweeps.objective import CONSTRAINT, OBJECTIVE, WALL_TIME_S, objective
 from sweeps.tracking import (
     ALGO_TAG,
     CHECKPOINT_TAG,
@@ -53,19 +53,6 @@ from sweeps.tracking import (
     TrialTracker,
     learning_curve,
 )
-
-INFEASIBLE_OFFSET = 1e6
-#: What a trial reports beside its iteration's row: the score Tune, ASHA and Optuna rank by, the
-#: constraint value Optuna's TPE reads (episode cost − limit, ≤ 0 feasible), the trial's wall time.
-OBJECTIVE, CONSTRAINT, WALL_TIME_S = "objective", "constraint", "wall_time_s"
-
-
-def objective(ret: float, cost: float, limit: float) -> float:
-    """One scalar for Tune/ASHA/Optuna: feasible trials rank by return; every infeasible trial
-    ranks below every feasible one (−10⁶ − violation), and less violation ranks higher."""
-    if math.isnan(ret) or math.isnan(cost):
-        return -2 * INFEASIBLE_OFFSET
-    return ret if cost <= limit else -INFEASIBLE_OFFSET - (cost - limit)
 
 
 class SweepTrial(tune.Trainable):

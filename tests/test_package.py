@@ -120,3 +120,21 @@ def test_no_module_outside_the_algorithm_folders_names_an_algorithm():
         naming += [f"{rel}:{n.lineno}: {n.value!r}" for n in ast.walk(tree)
                    if isinstance(n, ast.Constant) and n.value in ALGOS and id(n) not in docs]
     assert not naming, naming
+
+
+def test_reporting_and_running_do_not_import_each_other():
+    """Results and reports read what trials report (sweeps/objective.py) and how configurations are
+    written (sweeps/configurations.py), never the runner's modules; no module borrows another's
+    private names."""
+    import ast
+
+    reading = ("results", "report", "safety", "importance", "frontier", "chain_health", "confirm", "configurations")
+    bad = []
+    for path in sorted((ROOT / "sweeps").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sweeps")):
+                continue
+            bad += [f"{path.name} imports {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+            if path.stem in reading and node.module in ("sweeps.sweep", "sweeps.trainable"):
+                bad.append(f"{path.name} imports {node.module}")
+    assert not bad, bad

@@ -15,8 +15,8 @@ from mlflow.tracking import MlflowClient
 
 from lac_rllib.constrained.metrics import CHAIN_HEALTH_KEYS
 from sweeps import run as cli
+from sweeps.objective import objective
 from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
-from sweeps.trainable import objective
 
 REPO = Path(__file__).resolve().parents[2]
 
