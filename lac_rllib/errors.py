@@ -18,3 +18,9 @@ def excerpt(value: Any, limit: int = 60) -> str:
     """``repr(value)`` cut to at most ``limit`` characters (containers to their first items)."""
     text = _REPR.repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def cut(text: str, limit: int = 160) -> str:
+    """``text`` (an exception's message, say) on one line, cut to at most ``limit`` characters."""
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import yaml
 
-from lac_rllib.errors import excerpt
+from lac_rllib.errors import cut, excerpt
 
 MAX_BYTES = 1 << 20  #: a sweep file is a page of text; the largest built-in one is ~3 KB
 MAX_DEPTH = 32  #: nesting levels, expanded (the deepest key path of the schema is 7)
@@ -92,7 +92,7 @@ def _scan(text: str, loader) -> None:
         elif isinstance(event, yaml.AliasEvent):
             aliases += 1
             if aliases > MAX_ALIASES:
-                raise YamlRefused(f"more than {MAX_ALIASES} aliases (*{excerpt(event.anchor, 30)[1:-1]}); "
+                raise YamlRefused(f"more than {MAX_ALIASES} aliases (*{cut(event.anchor, 30)}); "
                                   f"accepted: up to {MAX_ALIASES}", event.start_mark.line + 1)
 
 

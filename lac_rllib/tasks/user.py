@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lac_rllib.errors import excerpt
+from lac_rllib.errors import cut, excerpt
 from lac_rllib.tasks.registry import TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.user:make_env"
@@ -128,7 +128,7 @@ def _call(what: str, call: str, fn, *args, **kwargs):
     try:
         return fn(*args, **kwargs)
     except Exception as e:  # the user's own code: any exception, said in one line
-        raise ValueError(f"{what}: {call} raised {type(e).__name__}: {excerpt(str(e), 160)[1:-1]}") from None
+        raise ValueError(f"{what}: {call} raised {type(e).__name__}: {cut(str(e))}") from None
 
 
 def _returns(what: str, call: str, out, n: int, shape: str):
@@ -150,7 +150,7 @@ def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = 
     try:
         inner = _inner(env_kwargs)
     except Exception as e:  # an import error, a bad id, the user's own exception: say which env
-        raise ValueError(f"task {source}: cannot be built ({type(e).__name__}: {excerpt(str(e), 160)[1:-1]})") from None
+        raise ValueError(f"task {source}: cannot be built ({type(e).__name__}: {cut(str(e))})") from None
     try:
         obs_dim, act_dim = check_env(inner, cost_key, f"task {source}")
     except ValueError:
