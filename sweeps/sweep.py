@@ -9,8 +9,10 @@ import os
 import platform
 import signal
 import sys
+import threading
 from pathlib import Path
 
+import optuna
 import ray
 from ray import tune
 from ray.tune.schedulers import ASHAScheduler
@@ -50,6 +52,21 @@ class ConstrainedOptunaSearch(OptunaSearch):
         if ot_trial is not None and constraint is not None and math.isfinite(constraint):
             ot_trial.set_constraint("episode_cost_minus_limit", float(constraint))
         super().on_trial_complete(trial_id, result=result, error=error)
+
+
+class PicklableNSGAIISampler(optuna.samplers.NSGAIISampler):
+    """Optuna 5.1's NSGA-II sampler holds a ``threading.Lock`` (its generation cache), which
+    Tune cannot pickle into the experiment state the Tuner writes at once (docs/dependencies.md,
+    "Optuna's NSGA-II and Tune's pickling"): the lock is left out and a new one made on load."""
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state.pop("_thread_lock", None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._thread_lock = threading.Lock()
 
 
 class SeedRepeater(Repeater):
@@ -214,22 +231,7 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
         name=plan.name, storage_path=plan.storage, failure_config=failure, checkpoint_config=ckpt,
         progress_reporter=LiveTable(plan.n_trials, plan.concurrency), verbose=1,
     )
-    search = None
-    if plan.trials is None:
-        import optuna
-
-        # The study lives in its own storage (plan.optuna_storage) under the sweep's name:
-        # optuna-dashboard opens it, and a resumed sweep goes on with the same study. TPE reads
-        # the constraint each configuration is told (ConstrainedOptunaSearch); random ignores it.
-        # A multi-objective search (motpe, nsga2) has two: return up, cost down; its result is the
-        # study's Pareto set (sweeps/report.py, pareto.json), the constraint marking the feasible part.
-        sampler = {"tpe": optuna.samplers.TPESampler, "motpe": optuna.samplers.TPESampler,
-                   "random": optuna.samplers.RandomSampler, "nsga2": optuna.samplers.NSGAIISampler}[sweep.searcher]
-        metric, mode = ((list(MULTI_OBJECTIVES), ["max", "min"]) if sweep.multi_objective else (METRIC, MODE))
-        optuna_search = ConstrainedOptunaSearch(sampler=sampler(seed=infra.optuna_seed),
-                                                metric=metric, mode=mode, study_name=plan.name,
-                                                storage=optuna.storages.RDBStorage(plan.optuna_storage))
-        search = SeedRepeater(optuna_search, repeat=len(plan.seeds))
+    search = search_algorithm(plan)
     scheduler = (ASHAScheduler(time_attr=ENV_STEPS, metric=METRIC, mode=MODE, max_t=plan.timesteps,
                                grace_period=max(1, plan.timesteps // 4)) if sweep.scheduler == "asha" else None)
     return tune.Tuner(
@@ -239,6 +241,25 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
                                     trial_name_creator=_trial_name),
         run_config=run_config,
     )
+
+
+def search_algorithm(plan: Plan) -> SeedRepeater | None:
+    """A search's Tune searcher (Optuna behind a SeedRepeater); None for a grid of configurations."""
+    if plan.trials is not None:
+        return None
+    sweep, infra = plan.sweep, plan.infra
+    # The study lives in its own storage (plan.optuna_storage) under the sweep's name:
+    # optuna-dashboard opens it, and a resumed sweep goes on with the same study. TPE reads
+    # the constraint each configuration is told (ConstrainedOptunaSearch); random ignores it.
+    # A multi-objective search (motpe, nsga2) has two: return up, cost down; its result is the
+    # study's Pareto set (sweeps/report.py, pareto.json), the constraint marking the feasible part.
+    sampler = {"tpe": optuna.samplers.TPESampler, "motpe": optuna.samplers.TPESampler,
+               "random": optuna.samplers.RandomSampler, "nsga2": PicklableNSGAIISampler}[sweep.searcher]
+    metric, mode = ((list(MULTI_OBJECTIVES), ["max", "min"]) if sweep.multi_objective else (METRIC, MODE))
+    optuna_search = ConstrainedOptunaSearch(sampler=sampler(seed=infra.optuna_seed),
+                                            metric=metric, mode=mode, study_name=plan.name,
+                                            storage=optuna.storages.RDBStorage(plan.optuna_storage))
+    return SeedRepeater(optuna_search, repeat=len(plan.seeds))
 
 
 def _trial_name(trial) -> str:

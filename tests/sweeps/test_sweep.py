@@ -16,7 +16,8 @@ from mlflow.tracking import MlflowClient
 from lac_rllib.constrained.metrics import CHAIN_HEALTH_KEYS
 from sweeps import run as cli
 from sweeps.objective import objective
-from sweeps.sweep import ConstrainedOptunaSearch, run_sweep
+from sweeps.sweep import ConstrainedOptunaSearch, run_sweep, search_algorithm
+from sweeps.sweep_file import MULTI_OBJECTIVE, SEARCHERS
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -524,3 +525,27 @@ def test_a_safety_gymnasium_task_new_to_the_registry_runs_a_smoke_trial(ray_sess
     assert child.info.status == "FINISHED" and child.data.params["task"] == "SafetyCarCircle1-v0"
     assert child.data.metrics["cost_limit"] == 25.0 and child.data.metrics["env_steps"] >= 2000
     assert [m.value for m in client.get_metric_history(child.info.run_id, "episode_cost")], "an episode completed"
+
+
+@pytest.mark.parametrize("searcher", [s for s in SEARCHERS if s != "grid"])
+def test_every_searcher_survives_tunes_pickling(tmp_path, searcher):
+    """Tune pickles its search algorithm into the experiment state when the Tuner is built: a
+    searcher that cannot be pickled fails the sweep before its first trial (Optuna 5.1's NSGA-II
+    holds a lock: docs/dependencies.md)."""
+    import optuna
+    from ray import cloudpickle
+
+    (tmp_path / "s.yaml").write_text(f"task: lac/PointHazard-v0\nbudget: smoke\nseeds: 2\nnum_samples: 4\n"
+                                     f"searcher: {searcher}\nsearch: {{beta: {{uniform: [0.0, 20.0]}}}}\n")
+    plan = cli.make_plan(cli.parse_args(["--config", str(tmp_path / "s.yaml"),
+                                         "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                                         "--storage", str(tmp_path / "rr"), "--experiment", "test"]))
+    search = cloudpickle.loads(cloudpickle.dumps(search_algorithm(plan)))
+    sampler = search.searcher._sampler
+    expected = {"random": "RandomSampler", "nsga2": "PicklableNSGAIISampler"}.get(searcher, "TPESampler")
+    assert search.repeat == 2 and type(sampler).__name__ == expected
+    # the loaded sampler still samples (NSGA-II takes its new lock on every call)
+    study = optuna.create_study(sampler=sampler, directions=["maximize", "minimize"]
+                                if searcher in MULTI_OBJECTIVE else ["maximize"])
+    study.optimize(lambda t: [t.suggest_float("x", 0, 1)] * len(study.directions), n_trials=3)
+    assert len(study.trials) == 3

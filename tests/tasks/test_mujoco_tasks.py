@@ -37,10 +37,12 @@ def test_specs():
     assert {t.id for t in mujoco_tasks.TASKS} == set(SPECS)
 
 
-def test_unknown_id_lists_known_ids():
+def test_unknown_id_names_the_closest_ids_and_where_all_are_listed():
+    from lac_rllib.tasks import known_tasks
+
     with pytest.raises(ValueError, match="focops/AntVelocity-v0") as err:
         get_task("focops/AntCircle-v0")
-    assert "SafetyPointGoal1-v0" in str(err.value)
+    assert f"(all {len(known_tasks())}: docs/tasks.md)" in str(err.value)
     with pytest.raises(ValueError, match="HumanoidCircle"):
         mujoco_tasks.make_env({"task": "AntCircle"})
 
