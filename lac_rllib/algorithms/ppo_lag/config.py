@@ -97,10 +97,16 @@ class PPOLagParams(SafeTaskParams):
     lr: float = param(3e-4, accepts=POSITIVE)
     """Adam learning rate of the policy at the start (RLlib's field; its default is 5e-5) [O, S]."""
     policy_lr_schedule: str = param("linear", accepts=one_of(POLICY_LR_SCHEDULES))
-    """"linear": the policy's lr decays linearly to 0 over total_env_steps [O linear_lr_decay];
-    "constant": no decay [S]. The critics' lr is constant in both [O, S]."""
+    """"linear": the policy's lr decays linearly to 0 over lr_decay_horizon env steps [O
+    linear_lr_decay]; "constant": no decay [S]. The critics' lr is constant in both [O, S]."""
+    lr_decay_horizon: int | None = param(None, accepts=or_none(INT_GE_1))
+    """Env steps over which the policy's lr decays to 0 [O: its run's total_steps]; None = the run's
+    own budget (total_env_steps). The Safety-Gym and MuJoCo presets set OmniSafe's 1e7
+    (PPOLag.yaml), so a 2.5M run trains at the lr OmniSafe's benchmark run had at that step, not
+    at an lr decayed to 0 by its own end (docs/baselines.md, "PPO-Lag's lr horizon")."""
     total_env_steps: int | None = param(None, accepts=or_none(INT_GE_1))
-    """The run's budget in env steps (lac-train and the sweep set it): the linear decay's horizon."""
+    """The run's budget in env steps (lac-train and the sweep set it): the linear decay's horizon
+    where lr_decay_horizon is None."""
     clip_param: float = param(0.2, accepts=POSITIVE)
     """ε of PPO's clipped surrogate (RLlib's field; its default is 0.3) [O, S]."""
     target_kl: float | None = param(0.02, accepts=or_none(POSITIVE))
@@ -139,11 +145,12 @@ class PPOLagParams(SafeTaskParams):
     """Intra-op torch threads of the learner process [D]; a sweep sets it to the CPUs of a trial."""
 
 
+OMNISAFE_BUDGET = 10_000_000  # env steps of OmniSafe's on-policy benchmark runs [O PPOLag.yaml total_steps]
 PRESETS: dict[str, dict[str, Any]] = {
-    # [O]'s PPOLag defaults are the fields' defaults; 10 and 5 envs split the 20k steps into whole
-    # 1000-step episodes per env (speed only).
-    "safety_gym": {"num_envs_per_env_runner": 10},
-    "mujoco": {"num_envs_per_env_runner": 5},
+    # [O]'s PPOLag defaults are the fields' defaults, its lr decaying over its benchmark's budget;
+    # 10 and 5 envs split the 20k steps into whole 1000-step episodes per env (speed only).
+    "safety_gym": {"num_envs_per_env_runner": 10, "lr_decay_horizon": OMNISAFE_BUDGET},
+    "mujoco": {"num_envs_per_env_runner": 5, "lr_decay_horizon": OMNISAFE_BUDGET},
     # [D] lac/PointHazard-v0 (100-step episodes, limit 2) learns safely in 40k steps, ~30 s on one
     # core (tests/algorithms/ppo_lag/test_ppo_lag_learning.py): 2000 steps (about 20 episodes) per
     # iteration, 10 epochs of 8 minibatches at lr 1e-3, and a faster ν over a window of about one
@@ -216,11 +223,17 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
         return self
 
     def policy_lr_or_schedule(self):
-        """The policy's lr as RLlib's ``lr_or_lr_schedule``: [[0, lr], [total_env_steps, 0]] in env steps
-        (RLlib's Scheduler is stepped after each update with the lifetime env steps), or the constant."""
+        """The policy's lr as RLlib's ``lr_or_lr_schedule``: [[0, lr], [horizon, 0]] in env steps
+        (RLlib's Scheduler is stepped after each update with the lifetime env steps and holds 0
+        past the horizon), or the constant."""
         if self.policy_lr_schedule == "constant":
             return self.lr
-        return [[0, self.lr], [self.total_env_steps, 0.0]]
+        return [[0, self.lr], [self.lr_horizon, 0.0]]
+
+    @property
+    def lr_horizon(self) -> int:
+        """The env steps the policy's lr decays over: lr_decay_horizon, else the run's budget."""
+        return int(self.lr_decay_horizon if self.lr_decay_horizon is not None else self.total_env_steps)
 
     # ----- RLlib hooks -----
     @override(PPOConfig)
@@ -229,9 +242,10 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
         for f in dataclasses.fields(PPOLagParams):
             FIELDS.check(f.name, getattr(self, f.name))
         self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
-        if self.policy_lr_schedule == "linear" and self.total_env_steps is None:
+        if self.policy_lr_schedule == "linear" and self.lr_decay_horizon is None and self.total_env_steps is None:
             raise ValueError("PPO-Lag config field total_env_steps=None is invalid with policy_lr_schedule='linear' "
-                             "(the decay needs a horizon); accepted: an integer >= 1, or policy_lr_schedule='constant'")
+                             "and no lr_decay_horizon (the decay needs a horizon); accepted: an integer >= 1, "
+                             "an lr_decay_horizon, or policy_lr_schedule='constant'")
 
     @override(AlgorithmConfig)
     def build_learner_connector(self, input_observation_space, input_action_space, device=None):
@@ -291,7 +305,8 @@ def plan_update_s(params: dict, preset: str) -> float:
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> PPOLagConfig:
     """The PPOLagConfig a run of ``timesteps`` env steps uses (validated; no Ray needed): the task's
-    preset (or ``sets["preset"]``), then ``sets``. The budget is the policy lr's decay horizon.
+    preset (or ``sets["preset"]``), then ``sets``. The budget is the policy lr's decay horizon
+    where lr_decay_horizon is None.
     ``cpus`` > 1 samples with that many env runners and updates with that many threads (LAC's use_cpus)."""
     from lac_rllib.constrained.cpus import set_runners
 

@@ -46,7 +46,10 @@ def test_defaults_are_omnisafe_and_rllib_defaults_that_break_it_are_overridden()
     assert model["vf_share_layers"] is False and model["free_log_std"] is True
     assert (model["fcnet_hiddens"], model["fcnet_activation"], model["head_fcnet_hiddens"]) == ([64, 64], "tanh", [])
     assert config.preset == "safety_gym" and config.num_envs_per_env_runner == 10
-    assert config.policy_lr_or_schedule() == [[0, 3e-4], [100_000, 0.0]]
+    # the policy's lr decays over OmniSafe's 1e7-step benchmark, not over this run's 100k
+    assert config.policy_lr_or_schedule() == [[0, 3e-4], [10_000_000, 0.0]]
+    tiny = C.build_config("lac/PointHazard-v0", 0, {}, timesteps=40_000)  # no preset horizon: its own budget
+    assert tiny.policy_lr_or_schedule() == [[0, 1e-3], [40_000, 0.0]]
 
 
 def test_presets_apply_and_explicit_values_win():

@@ -12,7 +12,7 @@ from ray.rllib.core.rl_module.rl_module import RLModule
 
 from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS, PPOLagTorchLearner
+from lac_rllib.algorithms.ppo_lag.learner import COST_CRITIC, CRITIC, POLICY, TS_EPISODE_COSTS, PPOLagTorchLearner
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 
@@ -122,5 +122,21 @@ def test_the_module_roles_and_its_deterministic_action(ray_session):
         mean = inputs[:, :2]
         # Box(−1, 1): RLlib's unsquash of the mean is the mean, clipped (to float rounding).
         torch.testing.assert_close(learner_module.deterministic_action(obs), mean.clamp(-1, 1))
+    finally:
+        algo.stop()
+
+
+def test_the_policy_lr_at_a_fifth_of_its_horizon_read_from_the_optimizers(ray_session):
+    # 400 steps per iteration over a horizon of 2000 (the run's own budget, 10k, is five times longer,
+    # as a 1e7 horizon is to a 2.5M run): after one iteration the lifetime count is 1/5 of the
+    # horizon, so the policy's lr is 4/5 of its start; the critics' lr does not decay.
+    algo = config(train_batch_size_per_learner=400, minibatch_size=200, num_epochs=1, lr=1e-3, critic_lr=5e-4,
+                  lr_decay_horizon=2_000, num_envs_per_env_runner=1).build_algo()
+    try:
+        algo.train()
+        lrn = algo.learner_group._learner  # the local learner, as the checkpoint test reads it
+        lrs = {name: opt.param_groups[0]["lr"] for name, opt in lrn.get_optimizers_for_module(DEFAULT_MODULE_ID)}
+        assert lrs[POLICY] == pytest.approx(1e-3 * (1 - 400 / 2_000), rel=1e-6), lrs
+        assert lrs[CRITIC] == lrs[COST_CRITIC] == 5e-4, lrs
     finally:
         algo.stop()
