@@ -152,9 +152,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "safety_gym": {"num_envs_per_env_runner": 10, "lr_decay_horizon": OMNISAFE_BUDGET},
     "mujoco": {"num_envs_per_env_runner": 5, "lr_decay_horizon": OMNISAFE_BUDGET},
     # [D] lac/PointHazard-v0 (100-step episodes, limit 2) learns safely in 40k steps, ~30 s on one
-    # core (tests/algorithms/ppo_lag/test_ppo_lag_learning.py): 2000 steps (about 20 episodes) per
-    # iteration, 10 epochs of 8 minibatches at lr 1e-3, and a faster ν over a window of about one
-    # iteration's episodes, for a run of 20 iterations rather than hundreds.
+    # core (tests/algorithms/ppo_lag/test_ppo_lag_learning.py): 2000 steps per iteration (20
+    # episodes of 100 steps at first, ~100 once the agent reaches the goal in ~20), 10 epochs of 8
+    # minibatches at lr 1e-3, and a faster ν (lr 0.1) on the last 20 episodes (one iteration's at
+    # first, a fifth of one later), for a run of 20 iterations rather than hundreds.
     "tiny": {"train_batch_size_per_learner": 2000, "num_envs_per_env_runner": 10, "minibatch_size": 250,
              "num_epochs": 10, "lr": 1e-3, "critic_lr": 1e-3, "lagrangian_lr": 0.1, "cost_window": 20},
     # [S] safety-starter-agents PPO-L as the paper ran it (scripts/experiment.py: 30k steps per
