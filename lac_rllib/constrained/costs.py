@@ -79,6 +79,32 @@ class ShuffleRows(ConnectorV2):
         return batch
 
 
+class DrawRows(ConnectorV2):
+    """Draws ``rows`` rows of the batched train batch uniformly *with* replacement (one index
+    array for all columns): each minibatch the learner then cuts from it in order is a uniform
+    draw from the buffer, as OmniSafe's ``OffPolicyBuffer.sample_batch`` (``torch.randint``) makes
+    one per gradient step. Without it the minibatches are shuffled passes over the buffer
+    (:class:`ShuffleRows`), no row drawn twice before every row was drawn once.
+    """
+
+    def __init__(self, *args, rows: int, seed: int | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.rows = int(rows)
+        self._rng = np.random.default_rng(seed)
+
+    @override(ConnectorV2)
+    def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
+        for module_id, columns in batch.items():
+            if not isinstance(columns, dict):
+                continue
+            n = {len(v) for v in columns.values() if isinstance(v, np.ndarray)}
+            if len(n) != 1:
+                continue
+            idx = self._rng.integers(0, n.pop(), size=self.rows)
+            batch[module_id] = {k: (v[idx] if isinstance(v, np.ndarray) else v) for k, v in columns.items()}
+        return batch
+
+
 class EpisodeCostCallback(RLlibCallback):
     """Accumulates each episode's cost (and return) on the env runner, as the task counts it.
 

@@ -36,15 +36,18 @@ class SACLag(OffPolicySafeAlgorithm):
         new_steps = self.lifetime_env_steps - before
         updating = self.lifetime_env_steps >= cfg.random_env_steps
         if updating:
-            self.update_from_replay(
-                minibatch_size=cfg.batch_size,
-                num_minibatches=max(1, round(cfg.updates_per_env_step * new_steps)),
-                timesteps={TS_EPISODE_COSTS: list(costs)},
+            if cfg.minibatch_draws == "with_replacement":
+                # The learner connector drew updates_per_iteration minibatches' rows (DrawRows):
+                # one pass over them, in order, is that many uniform draws from the buffer.
+                passes = {"num_minibatches": cfg.updates_per_iteration, "num_epochs": 1,
+                          "shuffle_batch_per_epoch": False}
+            else:
                 # num_epochs > 1 with a reshuffle: RLlib's MiniBatchCyclicIterator then reshuffles the
                 # buffer every time the minibatches wrap around it (at one update per env step an
                 # iteration draws several times a small buffer's rows); num_minibatches sets the steps.
-                num_epochs=2, shuffle_batch_per_epoch=True,
-            )
+                passes = {"num_minibatches": max(1, round(cfg.updates_per_env_step * new_steps)), "num_epochs": 2,
+                          "shuffle_batch_per_epoch": True}
+            self.update_from_replay(minibatch_size=cfg.batch_size, timesteps={TS_EPISODE_COSTS: list(costs)}, **passes)
         self.log_top_level(returns, costs)
         if not updating:
             # No learner results yet, so log_top_level found no ν: report λ as the learner holds it

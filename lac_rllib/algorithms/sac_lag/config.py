@@ -23,7 +23,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.constrained import fields, metrics
-from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
+from lac_rllib.constrained.costs import AddCostsFromInfos, DrawRows, ShuffleRows
 from lac_rllib.constrained.cpus import set_runners
 from lac_rllib.constrained.fields import (
     BOOL,
@@ -42,6 +42,7 @@ from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 LAGRANGIAN_RULES = ("adam", "gradient")
+MINIBATCH_DRAWS = ("with_replacement", "shuffled_passes")
 
 
 @dataclasses.dataclass
@@ -107,6 +108,11 @@ class SACLagParams(SafeTaskParams):
     [O: update_cycle = update_iters = 1]."""
     batch_size: int = param(256, accepts=INT_GE_1)
     """Minibatch size of each gradient step [O]."""
+    minibatch_draws: str = param("with_replacement", accepts=one_of(MINIBATCH_DRAWS))
+    """"with_replacement": each minibatch is batch_size rows drawn uniformly from the whole buffer
+    [O offpolicy_buffer.py sample_batch]; "shuffled_passes": the iteration's minibatches are cut
+    from shuffled passes over the buffer, reshuffled at each wrap (no row twice before every row
+    once; this implementation's draw before the field existed)."""
     replay_capacity: int = param(1_000_000, accepts=INT_GE_1)
     """Replay buffer capacity in env steps [O: size]."""
     random_env_steps: int = param(10_000, accepts=INT_GE_0)
@@ -207,15 +213,23 @@ class SACLagConfig(SafeTaskConfig, AlgorithmConfig):
         idx = max(worker_index - 1, 0)
         return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
 
+    @property
+    def updates_per_iteration(self) -> int:
+        """The gradient steps of an iteration that samples env_steps_per_iteration env steps."""
+        return max(1, round(self.updates_per_env_step * self.env_steps_per_iteration))
+
     @override(AlgorithmConfig)
     def build_learner_connector(self, input_observation_space, input_action_space, device=None):
         """RLlib's learner pipeline plus s' for the targets, then each row's cost (right after s':
-        docs/dependencies.md, "The cost column"), then a shuffle of the rows, as LAC's."""
+        docs/dependencies.md, "The cost column"), then the iteration's minibatch rows: drawn with
+        replacement (minibatch_draws) or the buffer's rows shuffled, as LAC's."""
         pipeline = super().build_learner_connector(
             input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
         pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch())
         pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
-        pipeline.insert_after(BatchIndividualItems, ShuffleRows(seed=self.seed))
+        draws = (DrawRows(rows=self.updates_per_iteration * self.batch_size, seed=self.seed)
+                 if self.minibatch_draws == "with_replacement" else ShuffleRows(seed=self.seed))
+        pipeline.insert_after(BatchIndividualItems, draws)
         return pipeline
 
     @override(AlgorithmConfig)

@@ -5,10 +5,11 @@ One ``learner_group.update`` call makes all the gradient steps of an iteration (
 ``updates_per_env_step``); per minibatch, in OmniSafe's order:
 
 1. the reward and cost critic steps (``compute_loss_for_module``: the targets in
-   :func:`critic_targets`, the losses beside them);
-2. on every ``policy_delay``-th step only, the actor step and then Polyak of both target critics
-   (``apply_gradients``; on the other steps the actor's gradients are dropped, so its Adam is not
-   stepped at all);
+   :func:`critic_targets`, the losses beside them; RLlib's backward and ``apply_gradients``);
+2. on every ``policy_delay``-th step only, the actor step on the critics *after* their step, as
+   OmniSafe's ``ddpg.py`` ``_update`` orders them, and then Polyak of both target critics
+   (``apply_gradients``: the actor's own forward and backward on the minibatch's observations; on
+   the other steps its Adam is not stepped at all);
 3. once past ``warmup_env_steps``, one step of λ (a LagrangeMultiplier with OmniSafe's Adam rule)
    from Ĵ_C, the mean cost of the last ``cost_window`` completed episodes. Ĵ_C is fixed within a
    call (the episodes arrive between calls), so N λ steps per call are OmniSafe's one per env step.
@@ -89,6 +90,7 @@ class SACLagTorchLearner(TorchLearner):
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
         self._cost_this_call: float | None = None  # Ĵ_C of the current update call; None: no λ step
         self._last: dict[str, dict[str, torch.Tensor]] = {}  # the last minibatch's metrics per module
+        self._actor_obs: dict[str, torch.Tensor] = {}  # the minibatch's observations, for the actor's step
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
         """λ of ``module``: OmniSafe's Adam step on −λ·(Ĵ_C − b), then λ ≥ 0 (no upper bound [O])."""
@@ -141,27 +143,21 @@ class SACLagTorchLearner(TorchLearner):
     # ----- losses -----
     @override(TorchLearner)
     def compute_loss_for_module(self, *, module_id, config, batch, fwd_out) -> torch.Tensor:
-        """The critic losses (MSE to the targets, summed over the two reward critics [O]) and, on a
-        policy-delay step, the actor loss. Their graphs are disjoint (the actor's forward runs the
-        critics frozen), so one backward serves the three optimizers."""
-        module = self.module[module_id].unwrapped()
+        """The critic losses: MSE to the targets, summed over the two reward critics [O]. The
+        actor's loss waits for the critics' step (:meth:`apply_gradients`); the minibatch's
+        observations are kept for it."""
         y_r, y_c = critic_targets(batch, fwd_out, config)
         q_r, q_c = fwd_out[M.Q_REWARD], fwd_out[M.Q_COST]
         reward_loss = ((q_r - y_r) ** 2).mean(-1).sum()  # mse(Q_R1, y_R) + mse(Q_R2, y_R)
         cost_loss = ((q_c - y_c) ** 2).mean()
-        last = {CRITIC_LOSS: reward_loss.detach() + cost_loss.detach(),
-                Q_REWARD_MEAN: q_r.detach().mean(), Q_COST_MEAN: q_c.detach().mean()}
-        loss = reward_loss + cost_loss
-        if self.is_actor_step():
-            pi_loss = actor_loss(module.forward_actor(batch[Columns.OBS]), module.nu, config.alpha)
-            last[ACTOR_LOSS] = pi_loss.detach()
-            loss = loss + pi_loss
-        self._last[module_id] = {**self._last.get(module_id, {}), **last}
-        return loss
+        self._last[module_id] = {**self._last.get(module_id, {}), CRITIC_LOSS: reward_loss.detach() + cost_loss.detach(),
+                                 Q_REWARD_MEAN: q_r.detach().mean(), Q_COST_MEAN: q_c.detach().mean()}
+        self._actor_obs[module_id] = batch[Columns.OBS]
+        return reward_loss + cost_loss
 
     @override(TorchLearner)
     def postprocess_gradients_for_module(self, *, module_id, config, module_gradients_dict):
-        """Drops the gradients that are None (the actor's off its steps, so its Adam is not stepped),
+        """Drops the gradients that are None (the actor's: its step comes after the critics'),
         then clips each network's gradients to a global norm of ``max_grad_norm`` [O]."""
         grads = {ref: g for ref, g in module_gradients_dict.items() if g is not None}
         if config.max_grad_norm is not None:
@@ -172,18 +168,37 @@ class SACLagTorchLearner(TorchLearner):
 
     @override(TorchLearner)
     def apply_gradients(self, gradients_dict) -> None:
-        """TorchLearner's optimizer steps (its NaN/inf guard included): a parameter whose .grad is
-        None (the actor off its step) is skipped by Adam, moments and step count included. Then, on
-        a policy-delay step, Polyak θ' ← τ·θ + (1 − τ)·θ' of both target critics [O]; then λ's step."""
+        """The critics' steps through TorchLearner's (its NaN/inf guard included: a parameter whose
+        .grad is None, the actor's, is skipped by Adam, moments and step count included). Then, on a
+        policy-delay step, the actor's step on the stepped critics and Polyak θ' ← τ·θ + (1 − τ)·θ'
+        of both target critics [O ddpg.py ``_update``]; then λ's step."""
         actor_step = self.is_actor_step()
         zero_non_finite_(gradients_dict)  # RLlib's NaN/inf guard, one test for all (constrained/gradients.py)
         super().apply_gradients(gradients_dict)
         for mid, module in self.module.items():
             config = self.config.get_config_for_module(mid)
-            if actor_step:
+            obs = self._actor_obs.pop(mid, None)
+            if actor_step and obs is not None:
+                self._actor_step(mid, module.unwrapped(), obs, config)
                 polyak(module.unwrapped().get_target_network_pairs(), config.polyak_tau)
             self.multipliers[mid].step(self._cost_this_call)  # None (warm-up, no episode yet): no step
         self.updates += 1
+
+    def _actor_step(self, module_id, module, obs: torch.Tensor, config) -> None:
+        """One step of the actor on :func:`actor_loss` at ``obs``, the critics as their step left
+        them [O ddpg.py: ``_update_actor`` after ``_update_reward_critic`` and ``_update_cost_critic``]:
+        its gradient clipped to ``max_grad_norm`` [O], RLlib's NaN/inf guard, then TorchLearner's
+        optimizer steps, the critics' gradients cleared first so that only the actor's Adam steps."""
+        for _, optimizer in self.get_optimizers_for_module(module_id):
+            optimizer.zero_grad(set_to_none=True)
+        params = self.get_parameters(module.actor)
+        pi_loss = actor_loss(module.forward_actor(obs), module.nu, config.alpha)
+        grads = dict(zip((self.get_param_ref(p) for p in params), torch.autograd.grad(pi_loss, params)))
+        if config.max_grad_norm is not None:
+            clip_global_norm_(list(grads.values()), config.max_grad_norm)
+        zero_non_finite_(grads)
+        super().apply_gradients(grads)
+        self._last[module_id][ACTOR_LOSS] = pi_loss.detach()
 
     # ----- state: λ rides in the module; the count, the window and the rules' state here -----
     @override(TorchLearner)

@@ -18,7 +18,7 @@ from lac_rllib.algorithms.sac_lag.config import FIELDS, PRESETS, SACLagConfig, b
 from lac_rllib.algorithms.sac_lag.learner import ACTOR, actor_loss, critic_targets
 from lac_rllib.algorithms.sac_lag.module import SACLagTorchRLModule
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, NU, TS_EPISODE_COSTS
+from lac_rllib.constrained.metrics import ACTOR_LOSS, ENV_STEPS, EPISODE_COST, NU, TS_EPISODE_COSTS
 from lac_rllib.tasks import get_task
 
 OBS, ACT, B = 5, 2, 64
@@ -157,16 +157,64 @@ def test_policy_delay_steps_the_actor_and_polyak_on_every_second_update_only(one
 
 
 def test_a_nan_gradient_is_zeroed_as_torch_learner_does(one_torch_thread):
-    """SAC-Lag's apply_gradients goes through TorchLearner's, whose guard turns NaN/inf gradients
-    into zeros instead of writing NaN into the weights (and Polyak then into the targets)."""
-    learner = _learner()
-    learner.updates = 1  # a policy-delay step: the actor and Polyak too
+    """SAC-Lag's steps go through TorchLearner's apply_gradients, whose guard turns NaN/inf gradients
+    into zeros instead of writing NaN into the weights (and Polyak then into the targets): a NaN
+    observation makes every network's gradient NaN, the critics' and the actor's own step's."""
+    learner = _learner(policy_delay=1)  # every update steps the actor and Polyak too
     module = learner.module[DEFAULT_MODULE_ID]
-    nets = (module.reward_critics, module.cost_critic, module.actor)
-    params = [p for net in nets for p in learner.get_parameters(net)]
-    learner.apply_gradients({learner.get_param_ref(p): torch.full_like(p, float("nan")) for p in params})
-    targets = [*module.target_reward_critics.parameters(), *module.target_cost_critic.parameters()]
-    assert all(torch.isfinite(p).all() for p in params + targets)
+    b = {k: v.numpy() for k, v in _batch(n=64, obs_dim=7, low=-np.ones(ACT), high=np.ones(ACT)).items()}
+    b[Columns.OBS][3, 0] = np.nan
+    learner.update(batch=MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch(b)}, env_steps=64), minibatch_size=64,
+                   num_total_minibatches=1, num_epochs=1, shuffle_batch_per_epoch=False,
+                   timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 10**6, TS_EPISODE_COSTS: [3.0]})
+    nets = (module.reward_critics, module.cost_critic, module.actor, module.target_reward_critics,
+            module.target_cost_critic)
+    assert all(torch.isfinite(p).all() for net in nets for p in net.parameters())
+    actor_adam = learner.get_optimizer(DEFAULT_MODULE_ID, ACTOR)
+    assert all(int(actor_adam.state[p]["step"]) == 1 for p in module.actor.parameters())  # it did step
+
+
+def test_the_actor_steps_on_the_critics_after_their_step(one_torch_thread):
+    """OmniSafe's order (ddpg.py ``_update``): the critics step, then the actor's loss is taken on
+    the stepped critics. Checked by hand on one minibatch: the critics the actor's forward sees
+    are the updated ones; the loss the learner logs is the hand-computed loss on them (not on the
+    critics before their step), and its clipped gradient is what the actor's Adam holds."""
+    import copy
+
+    learner = _learner(policy_delay=1)
+    module = learner.module[DEFAULT_MODULE_ID]
+    before = copy.deepcopy(module)
+    seen, forward_actor = {}, module.forward_actor
+
+    def recording(obs):
+        seen["obs"], seen["critics"] = obs.clone(), _snapshot(module.reward_critics) + _snapshot(module.cost_critic)
+        torch.manual_seed(7)  # the reparameterisation noise, drawn again by hand below
+        return forward_actor(obs)
+
+    module.forward_actor = recording
+    _update(learner, 1)
+    stepped = _snapshot(module.reward_critics) + _snapshot(module.cost_critic)
+    old = _snapshot(before.reward_critics) + _snapshot(before.cost_critic)
+    assert all(torch.equal(a, b) for a, b in zip(seen["critics"], stepped))
+    assert not all(torch.equal(a, b) for a, b in zip(seen["critics"], old))
+
+    def by_hand(critics_of):
+        hand = copy.deepcopy(before)  # the actor and ν before the update
+        hand.reward_critics.load_state_dict(critics_of.reward_critics.state_dict())
+        hand.cost_critic.load_state_dict(critics_of.cost_critic.state_dict())
+        torch.manual_seed(7)
+        return actor_loss(hand.forward_actor(seen["obs"]), hand.nu, learner.config.alpha), hand
+
+    on_stepped, hand = by_hand(module)
+    on_old, _ = by_hand(before)
+    logged = float(learner._last[DEFAULT_MODULE_ID][ACTOR_LOSS])
+    assert logged == pytest.approx(float(on_stepped), abs=1e-6)
+    assert abs(float(on_old) - float(on_stepped)) > 1e-4  # the two orders are told apart
+    grads = torch.autograd.grad(on_stepped, list(hand.actor.parameters()))
+    scale = min(1.0, learner.config.max_grad_norm / (float(torch.nn.utils.get_total_norm(grads)) + 1e-6))
+    adam = learner.get_optimizer(DEFAULT_MODULE_ID, ACTOR)
+    for p, g in zip(module.actor.parameters(), grads):  # Adam's first moment after one step: (1 − β₁)·g
+        torch.testing.assert_close(adam.state[p]["exp_avg"], 0.1 * scale * g, atol=1e-7, rtol=1e-5)
 
 
 def test_lambda_waits_for_the_warm_up_then_steps_once_per_update(one_torch_thread):
@@ -186,16 +234,18 @@ def _probe_config(**sets):
     return build_config(PROBE, 0, {**base, **sets})
 
 
-@pytest.mark.parametrize("num_envs", [1, 3])
-def test_every_train_row_carries_its_own_cost(ray_session, num_envs):
-    # 50 steps per iteration with 7-step episodes: chunks are cut mid-episode every time.
-    algo = _probe_config(num_envs_per_env_runner=num_envs).build_algo()
+@pytest.mark.parametrize("num_envs, draws", [(1, "with_replacement"), (3, "with_replacement"), (3, "shuffled_passes")])
+def test_every_train_row_carries_its_own_cost(ray_session, num_envs, draws):
+    # 50 steps per iteration with 7-step episodes: chunks are cut mid-episode every time. Drawn
+    # with replacement, the batch is the iteration's 50 minibatches of 16 rows; else the buffer.
+    algo = _probe_config(num_envs_per_env_runner=num_envs, minibatch_draws=draws).build_algo()
     try:
         for _ in range(3):
             result = algo.train()
         b = train_batch(algo)
         t = b[Columns.OBS][:, 0]
-        assert len(t) == result[ENV_STEPS] >= 150
+        assert result[ENV_STEPS] >= 150
+        assert len(t) == (50 * 16 if draws == "with_replacement" else result[ENV_STEPS])
         np.testing.assert_array_equal(b[COSTS], 2 * t + 1)
         np.testing.assert_array_equal(b[Columns.REWARDS], -t)
         np.testing.assert_array_equal(b[Columns.NEXT_OBS][:, 0], t + 1)
