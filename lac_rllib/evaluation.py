@@ -14,7 +14,9 @@ this process, without ``ray.init``:
   (``update_stats=False``) holding the same state, so evaluation never moves the statistics;
 * the task id and the LAC config fields from the checkpoint's ``rllib_checkpoint.json``,
   which ``SafeAlgorithm.get_metadata`` fills (``checkpoint_format`` 3; format 2 is read too). The lac-rllib major.minor
-  version and the format must match the installed ones.
+  version and the format must match the installed ones;
+* its algorithm (``algo``): one of the registry's, or a user's own, imported again by the module
+  path it ran under (from the Python path or the working directory: lac_rllib/algorithms/registry.py).
 
 ``evaluate(policy, episodes, seed, actions=...)`` runs ``episodes`` episodes, episode ``i``
 reset with seed ``seed + i``, fully deterministic for equal seeds:
@@ -253,11 +255,16 @@ def restore_policy(checkpoint_path: str) -> Policy:
         DEFAULT_MODULE_ID,
     )
 
+    from lac_rllib.algorithms.registry import DEFAULT_ALGO, check_algo
     from lac_rllib.tasks import get_task, known_tasks
     from lac_rllib.tasks.user import register_definition
 
     ckpt = find_checkpoint_dir(checkpoint_path)
     meta = read_metadata(ckpt)
+    try:  # a user's algorithm is imported again by the path it ran under (the checkpoint's algo)
+        check_algo(meta.get("algo") or DEFAULT_ALGO, (os.getcwd(),))
+    except ValueError as e:
+        raise CheckpointError(f"checkpoint algorithm is not available here: {one_line(str(e))}") from None
     if meta.get("task_definition") and meta["task_id"] not in known_tasks():
         register_definition(meta["task_definition"])  # a user's env: its spec is in the checkpoint
     try:

@@ -1,5 +1,6 @@
 """Single-run trainer: ``python -m lac_rllib.train --task ID --timesteps N --seed S --output DIR``
-(``--algo NAME`` trains another algorithm of the registry instead: lac_rllib/algorithms/registry.py).
+(``--algo NAME`` trains another algorithm of the registry instead: lac_rllib/algorithms/registry.py;
+``--algo mypkg.safe_algo`` a user's own, named by its module's import path).
 
 Prints one progress line per iteration and, as the last line of stdout, one JSON object with
 the final metrics and the checkpoint path. Every argument is checked before Ray starts.
@@ -199,8 +200,9 @@ def main(argv: list[str] | None = None) -> int:
             f"  {k}: {docs.get(k, '')} Accepted: {FIELD_RANGES[k].text}." for k in sorted(FIELD_NAMES))
         + f"\n\nThe other algorithms' fields (--algo {registry.algos_text()}): docs/config.md.",
     )
-    parser.add_argument("--algo", default=registry.DEFAULT_ALGO, choices=list(registry.ALGOS),
-                        help="the algorithm: LAC or a baseline (default lac)")
+    parser.add_argument("--algo", default=registry.DEFAULT_ALGO,
+                        help=f"the algorithm: {registry.algos_text()} (default lac), or the import path of your own "
+                             "algorithm's module, e.g. mypkg.safe_algo (docs/baselines.md)")
     parser.add_argument("--task", default="lac/PointHazard-v0", help=f"one of: {', '.join(known_tasks())}")
     parser.add_argument("--timesteps", type=int, required=True, help="env steps to train for (>= 1)")
     parser.add_argument("--seed", type=int, default=0)
@@ -223,6 +225,11 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--checkpoint-every {args.checkpoint_every} is invalid; accepted: an integer >= 0")
         if args.num_env_runners < 0:
             raise ValueError(f"--num-env-runners {args.num_env_runners} is invalid; accepted: an integer >= 0")
+        try:  # a user's module is imported and checked here, from the Python path or the working
+            # directory (which Ray's workers share)
+            registry.check_algo(args.algo, (os.getcwd(),))
+        except ValueError as e:
+            raise ValueError(f"--algo: {e}") from None
         config = registry.build_config(args.algo, args.task, args.seed, registry.parse_sets(args.algo, args.set),
                                        args.num_env_runners, args.timesteps, cpus=args.cpus)
         check_output(args.output, config, args.resume)

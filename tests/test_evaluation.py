@@ -231,6 +231,14 @@ def test_a_format_2_checkpoint_restores_with_its_old_key(ckpt_copy):
     assert policy.algo_config == fields and policy.task_id == TASK
 
 
+def test_an_algorithm_not_importable_here_is_one_line(ckpt_copy):
+    """A user's algorithm is imported again by the path the checkpoint names: gone, it is said so."""
+    _edit_metadata(ckpt_copy, algo="gone.safe_algo")
+    with pytest.raises(CheckpointError, match=r"^checkpoint algorithm is not available here: unknown algo "
+                                              r"'gone.safe_algo'; accepted: lac \| ppo_lag \| sac_lag, or the "):
+        restore_policy(str(ckpt_copy))
+
+
 def test_not_a_lac_checkpoint(ckpt_copy):
     file = ckpt_copy / "rllib_checkpoint.json"
     meta = {k: v for k, v in json.loads(file.read_text()).items() if not k.startswith(("lac", "checkpoint_f"))}

@@ -154,3 +154,34 @@ def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path,
 
     (tmp_path / CONFIG).write_text(json.dumps({k: v for k, v in started.items() if k != "resolved"}))
     check_output(str(tmp_path), elsewhere, resume=True)
+
+
+def test_algo_takes_a_users_module_by_its_import_path_and_refuses_a_bad_one_before_ray(tmp_path, monkeypatch,
+                                                                                        capsys):
+    """``--algo tests.algorithms.toy_algo``: its config, its own field by --set, its path in config.json."""
+    from pathlib import Path
+
+    import lac_rllib.train as cli
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1]))
+    monkeypatch.setattr(cli, "start_ray", lambda **_: pytest.fail("Ray was started"))
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--algo", "nowhere.algo", "--timesteps", "400", "--output", str(tmp_path / "bad")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1, err
+    assert err.startswith("lac-train: error: --algo: unknown algo 'nowhere.algo'; accepted: lac | ppo_lag | sac_lag, "
+                          "or the import path of your own algorithm's module"), err
+
+    ran = {}
+
+    def train(config, *args, **kwargs):  # what main hands the trainer, without training
+        ran["config"] = config
+        return {}
+
+    monkeypatch.setattr(cli, "start_ray", lambda **_: None)
+    monkeypatch.setattr(cli, "train", train)
+    cli.main(["--algo", "tests.algorithms.toy_algo", "--set", "toy_marker=3.0", "--timesteps", "400",
+              "--output", str(tmp_path / "toy")])
+    config = ran["config"]
+    assert type(config).__name__ == "ToyConfig" and config.toy_marker == 3.0
+    assert run_config(config)["algo"] == "tests.algorithms.toy_algo"  # config.json names it by its path

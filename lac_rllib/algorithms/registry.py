@@ -16,13 +16,26 @@ docs treat every algorithm alike:
   seconds per env step on one CPU), and on ``CONFIG_CLASS`` ``REPORTED_KEYS`` (the learner's values
   an iteration's row carries) and ``TASK_FAMILY_OVERRIDES`` (fields per task family).
 
+A user's own algorithm is named by the import path of such a module (``mypkg.safe_algo``: a sweep
+file's ``algo: {module: mypkg.safe_algo}``, ``--algo`` of lac-train, ``--set algo=``): that path
+is its name everywhere (trial params, MLflow, ``config.json``, the checkpoint's ``algo``), so every
+process imports it again by it. It is checked when first named (:func:`check_algo`: it imports,
+exposes :data:`REQUIRED`, and its algorithm class names itself by the path in ``ALGO``), before Ray
+starts; docs/baselines.md, "Your own algorithm", says how to write one.
+
 Imports are lazy: naming an algorithm costs nothing until it is built.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import os
+import re
+import sys
 from types import ModuleType
+
+from lac_rllib.errors import cut, excerpt
 
 #: algo → its config module. The order is the report's (LAC first).
 ALGOS: dict[str, str] = {
@@ -35,15 +48,100 @@ DEFAULT_ALGO = "lac"
 ALGO_FIELD = "algo"
 
 
-def check_algo(algo) -> str:
-    if algo not in ALGOS:
-        raise ValueError(f"unknown algo {algo!r}; accepted: {' | '.join(ALGOS)}")
+#: The names every algorithm's config module exposes (the optional ones: the module docstring).
+REQUIRED = ("CONFIG_CLASS", "PARAMS", "FIELDS", "PRESETS", "SPEED_FIELDS", "ACTIONS", "build_config")
+#: An import path: identifiers joined by dots (what a user's algorithm is named by).
+MODULE_PATH = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
+#: Users' modules checked in this process (import path → module): each is checked once.
+_USER: dict[str, ModuleType] = {}
+
+
+def check_algo(algo, search_dirs: tuple[str, ...] = ()) -> str:
+    """``algo`` if it names an algorithm: a name of :data:`ALGOS`, or the import path of a user's
+    module (imported from the Python path, else from the first of ``search_dirs`` holding it, and
+    checked: :func:`user_module`). Else a one-line ValueError naming it and what is accepted."""
+    if is_builtin(algo):
+        return algo
+    user_module(algo, search_dirs)
     return algo
+
+
+def is_builtin(algo: str) -> bool:
+    """Whether ``algo`` is one of the package's algorithms (else the import path of a user's)."""
+    return isinstance(algo, str) and algo in ALGOS
+
+
+def user_module(path, search_dirs: tuple[str, ...] = ()) -> ModuleType:
+    """The config module of a user's algorithm, checked: it imports, it exposes :data:`REQUIRED`,
+    and its algorithm class names itself ``path`` (``ALGO``), the name checkpoints restore it by."""
+    if isinstance(path, str) and path in _USER:
+        return _USER[path]
+    accepted = f"accepted: {algos_text()}, or the import path of your own algorithm's module"
+    if not (isinstance(path, str) and MODULE_PATH.fullmatch(path)):
+        raise ValueError(f"unknown algo {excerpt(path)}; {accepted} (docs/baselines.md)")
+    _find(path, search_dirs)
+    try:
+        module = importlib.import_module(path)
+    except ModuleNotFoundError as e:
+        if e.name and (path == e.name or path.startswith(e.name + ".")):  # the path itself, not what it imports
+            where = "the Python path" + (f" nor {', '.join(search_dirs)}" if search_dirs else "")
+            raise ValueError(f"unknown algo {path!r}; {accepted} (no module {e.name!r} on {where}; "
+                             "docs/baselines.md)") from None
+        raise ValueError(f"algo {path}: cannot be imported ({type(e).__name__}: {cut(str(e))})") from None
+    except Exception as e:  # the user's own code: any exception, said in one line
+        raise ValueError(f"algo {path}: cannot be imported ({type(e).__name__}: {cut(str(e))})") from None
+    missing = [n for n in REQUIRED if not hasattr(module, n)]
+    if missing:
+        raise ValueError(f"algo {path}: its module lacks {', '.join(missing)}; accepted: a module exposing "
+                         f"{', '.join(REQUIRED)} (docs/baselines.md, \"Your own algorithm\")")
+    try:
+        algo_class = module.CONFIG_CLASS().algo_class
+    except Exception as e:  # the user's own code
+        raise ValueError(f"algo {path}: CONFIG_CLASS() raised {type(e).__name__}: {cut(str(e))}") from None
+    name = getattr(algo_class, "ALGO", None)
+    if name != path:
+        own = f" (or name the package's own as {name})" if is_builtin(name) else ""
+        raise ValueError(f"algo {path}: its algorithm {getattr(algo_class, '__name__', algo_class)} names itself "
+                         f"{name!r} (ALGO); accepted: ALGO = {path!r}, the path its runs and checkpoints name it "
+                         f"by{own}")
+    _USER[path] = module
+    return module
+
+
+def _find(path: str, search_dirs: tuple[str, ...]) -> None:
+    """Put the first of ``search_dirs`` holding ``path``'s top-level module on ``sys.path``, unless
+    the Python path has it already (a user's module beside the sweep file, as a user env's)."""
+    top = path.split(".")[0]
+    if importlib.util.find_spec(top) is not None:
+        return
+    for folder in search_dirs:
+        if os.path.exists(os.path.join(folder, top + ".py")) or os.path.isdir(os.path.join(folder, top)):
+            sys.path.append(folder)
+            return
+
+
+def module_dir(algo: str) -> str | None:
+    """The folder a process puts on its path to import a user's ``algo`` (its top-level package's
+    parent): Ray's workers do not share the driver's path. None: one of the package's algorithms."""
+    if is_builtin(algo):
+        return None
+    check_algo(algo)
+    top = sys.modules[algo.split(".")[0]]
+    locations = list(getattr(top, "__path__", None) or [])  # a package (a namespace one has no __file__)
+    return os.path.dirname(locations[0]) if locations else os.path.dirname(top.__file__)
+
+
+def add_module_dir(folder: str | None) -> None:
+    """Make a user's algorithm importable in this process (a trial's: :func:`module_dir`)."""
+    if folder and folder not in sys.path:
+        sys.path.append(folder)
 
 
 def algo_config(algo: str) -> ModuleType:
     """The config module of ``algo`` (an unknown name raises a ValueError listing the accepted ones)."""
-    return importlib.import_module(ALGOS[check_algo(algo)])
+    if is_builtin(algo):
+        return importlib.import_module(ALGOS[algo])
+    return user_module(algo)
 
 
 def algos_text(sep: str = " | ") -> str:

@@ -62,3 +62,61 @@ def test_an_algorithm_that_declares_nothing_gets_the_defaults(monkeypatch):
     assert registry.plan_update_s("bare", {}, "tiny") == 0.0
     assert registry.reported_keys("bare") == ()
     assert "bare" in registry.algos_text()
+
+
+# ---------------------------------------------------------------- a user's own algorithm (tests/algorithms/toy_algo.py)
+TOY = "tests.algorithms.toy_algo"
+REPO = str(__import__("pathlib").Path(__file__).resolve().parents[2])
+
+
+def test_every_algorithm_exposes_the_names_a_users_module_must():
+    for algo in registry.ALGOS:
+        assert [n for n in registry.REQUIRED if not hasattr(registry.algo_config(algo), n)] == [], algo
+
+
+def test_a_users_algorithm_is_named_by_its_import_path_and_read_like_the_package_s(monkeypatch):
+    monkeypatch.syspath_prepend(REPO)
+    assert registry.check_algo(TOY) == TOY and not registry.is_builtin(TOY)
+    assert registry.algo_config(TOY).__name__ == TOY
+    # Its own sizes at the smoke budget, its own reported key, the defaults where it declares nothing.
+    assert registry.budget_fields(TOY, "smoke", "tiny")["hidden"] == (16, 16)
+    assert registry.budget_fields("ppo_lag", "smoke", "tiny")["hidden"] == (32, 32)
+    assert registry.reported_keys(TOY)[-1] == "toy_marker" and "toy_marker" not in registry.reported_keys("ppo_lag")
+    assert registry.plan_update_s(TOY, {}, "tiny") == 0.0
+    config = registry.build_config(TOY, "lac/PointHazard-v0", 0, {"toy_marker": 2.5}, timesteps=2000)
+    assert config.params()["toy_marker"] == 2.5 and config.algo_class.ALGO == TOY
+    assert registry.parse_sets(TOY, ["toy_marker=3.0"]) == {"toy_marker": 3.0}
+    assert registry.module_dir(TOY) == REPO and registry.module_dir("lac") is None  # where trials import it from
+
+
+ALGO_MODULES = {
+    "half_algo": ("CONFIG_CLASS = object\nACTIONS = ('generator',)\n",
+                  "algo half_algo: its module lacks PARAMS, FIELDS, PRESETS, SPEED_FIELDS, build_config; accepted: "
+                  "a module exposing CONFIG_CLASS, PARAMS"),
+    "broken_algo": ("raise RuntimeError('needs a GPU')\n",
+                    "algo broken_algo: cannot be imported (RuntimeError: needs a GPU)"),
+    "needy_algo": ("import not_installed_dependency\n",
+                   "algo needy_algo: cannot be imported (ModuleNotFoundError: No module named "
+                   "'not_installed_dependency')"),
+    # PPO-Lag's names re-exported as they are: its algorithm would call itself ppo_lag in every checkpoint.
+    "borrowed_algo": ("from lac_rllib.algorithms.ppo_lag.config import *  # noqa\n"
+                      "from lac_rllib.algorithms.ppo_lag.config import CONFIG_CLASS, PARAMS, FIELDS, PRESETS\n",
+                      "algo borrowed_algo: its algorithm PPOLag names itself 'ppo_lag' (ALGO); accepted: "
+                      "ALGO = 'borrowed_algo'"),
+    "nowhere.algo": (None, "unknown algo 'nowhere.algo'; accepted: lac | ppo_lag | sac_lag, or the import path of "
+                           "your own algorithm's module (no module 'nowhere' on the Python path nor"),
+    "my-algo": (None, "unknown algo 'my-algo'; accepted: lac | ppo_lag | sac_lag, or the import path"),
+}
+
+
+@pytest.mark.parametrize("name", ALGO_MODULES)
+def test_a_users_module_that_cannot_run_is_one_line_naming_it(tmp_path, monkeypatch, name):
+    """Found beside the sweep file (a search dir), checked before anything is built."""
+    source, needle = ALGO_MODULES[name]
+    if source is not None:
+        (tmp_path / f"{name}.py").write_text(source)
+    monkeypatch.setattr(sys, "path", list(sys.path))  # the search dir it adds goes with the test
+    with pytest.raises(ValueError) as e:
+        registry.check_algo(name, (str(tmp_path),))
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+    assert name not in registry._USER  # refused: checked again next time, not remembered
