@@ -48,6 +48,8 @@ class Plan:
     confirm: tuple | None = None
     #: A confirmation sweep's winners (sweeps/confirm.py ``winners``): its report says whether each held up.
     confirms: tuple | None = None
+    #: A user's algorithm (its import path) → the folder its trials import it from (registry.module_dir).
+    user_algos: dict = dataclasses.field(default_factory=dict)
 
     @property
     def task(self) -> str | None:

@@ -19,7 +19,15 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, algos_text, check_algo, plan_update_s
+from lac_rllib.algorithms.registry import (
+    ALGO_FIELD,
+    DEFAULT_ALGO,
+    algos_text,
+    check_algo,
+    is_builtin,
+    module_dir,
+    plan_update_s,
+)
 from sweeps import spaces, sweep_file
 from sweeps.lock import DriverLock, SweepLocked
 from sweeps.plan import Infra, Plan
@@ -120,7 +128,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="the confirmation's budget: the sweep's (default) or a larger one")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
-                        f"algo={algos_text('|')} picks the algorithm (fields: docs/config.md)")
+                        f"algo={algos_text('|')} picks the algorithm (fields: docs/config.md), or "
+                        "algo=mypkg.safe_algo your own algorithm's module (docs/baselines.md)")
     return p.parse_args(argv)
 
 
@@ -189,12 +198,17 @@ def make_plan(args) -> Plan:
     if address not in (None, "local"):
         check_shared(infra.tracking_uri, args.storage, infra.address_from)
     check_reachable(infra.tracking_uri)
-    # A user's env module is looked up on the Python path, then beside the sweep file, then here.
-    search_dirs = ((str(Path(args.config).resolve().parent),) if args.config else ()) + (os.getcwd(),)
-    plan = plan_sweep(sweep, space, infra, search_dirs, origin, max_trials=args.max_trials)
+    plan = plan_sweep(sweep, space, infra, module_search_dirs(args), origin, max_trials=args.max_trials)
     if args.confirm_top:
         plan = dataclasses.replace(plan, confirm=check_confirm(plan, args))
     return plan
+
+
+def module_search_dirs(args) -> tuple[str, ...]:
+    """Where a user's module (an env factory's, an algorithm's) is looked up after the Python path:
+    beside the sweep file, then here."""
+    return tuple(dict.fromkeys(((str(Path(args.config).resolve().parent),) if args.config else ())
+                               + (os.getcwd(),)))
 
 
 def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = (),
@@ -241,6 +255,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=max(t.timesteps for t in first),
         estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
+        user_algos=user_algos(sweep),
     )
 
 
@@ -264,6 +279,7 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     Returns it, the sweep's kind (the built-in space or the file's stem) and where each key came from."""
     path = Path(args.config) if args.config else sweep_file.builtin_path(args.space)
     base, origin = sweep_file.load_with_origin(path)
+    dirs = module_search_dirs(args)
     space = args.space or path.stem
     data = base.model_dump(exclude_none=True)
     if args.task:
@@ -277,7 +293,10 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     algo_pairs = [p for p in args.set if p.partition("=")[0].strip() == ALGO_FIELD]
     cli_sets = parse_set_pairs([p for p in args.set if p not in algo_pairs])
     if algo_pairs:
-        algo = check_algo(algo_pairs[-1].partition("=")[2].strip())
+        try:
+            algo = check_algo(algo_pairs[-1].partition("=")[2].strip(), dirs)
+        except ValueError as e:
+            raise ValueError(f"--set {ALGO_FIELD}: {e}") from None
         if sweeps_algo(base):
             raise ValueError(f"--set {algo_pairs[-1]}: {path.name} sweeps algo itself ({list(swept_algos(base))}); "
                              "accepted: --set of fields every algorithm it runs has")
@@ -308,8 +327,8 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
         group = sweep_file.safe_name(space)
         data["groups"] = {group: {"grid": data.pop("grid", {})}} if data.get("grid") else {group: {}}
     try:
-        sweep = SweepFile.model_validate(data)
-        sweep_file.check_fields(sweep)
+        sweep = SweepFile.model_validate(data, context={"search_dirs": dirs})
+        sweep_file.check_fields(sweep, dirs)
     except sweep_file.FieldError as e:
         raise ValueError(f"{origin(e.loc)}: {e.message}") from None
     except ValidationError as e:  # a flag's value the file's schema refuses
@@ -346,6 +365,15 @@ def swept_algos(sweep: SweepFile) -> tuple:
     if sweep.grid and ALGO_FIELD in sweep.grid:
         found += list(sweep.grid[ALGO_FIELD])
     return tuple(dict.fromkeys(found))
+
+
+def user_algos(sweep: SweepFile) -> dict[str, str]:
+    """Each user's algorithm the sweep names (checked when the file was read) → the folder its
+    trials import it from (Ray's workers do not share this process's path)."""
+    groups = [*(sweep.groups or {}).values(), *(g for at in sweep.groups_at for g in at.groups.values())]
+    named = [*sweep.algo, *swept_algos(sweep), *(s[ALGO_FIELD] for s in (sweep.set, *(g.set for g in groups))
+                                                 if ALGO_FIELD in s)]
+    return {a: module_dir(a) for a in dict.fromkeys(named) if not is_builtin(a)}
 
 
 def sweeps_algo(sweep: SweepFile) -> bool:

@@ -107,9 +107,21 @@ def versions() -> dict:
             "platform": platform.platform(), **runtime_versions()}
 
 
+def worker_env(plan: Plan) -> dict | None:
+    """The job's runtime env: a user's algorithm's folders on every worker's PYTHONPATH, so the env
+    runners and learners a trial starts (``cpus_per_trial`` > 1) unpickle its config classes too
+    (a trial adds them to its own path: sweeps/trainable.py). None: nothing to add."""
+    folders = [f for f in dict.fromkeys(plan.user_algos.values()) if f]
+    if not folders:
+        return None
+    path = os.pathsep.join([*folders, *filter(None, [os.environ.get("PYTHONPATH")])])
+    return {"env_vars": {"PYTHONPATH": path}}
+
+
 def param_space(plan: Plan, parent_run_id: str) -> dict:
     common = {
         "timesteps": plan.timesteps, "cpus": plan.sweep.cpus_per_trial, "user_tasks": plan.user_tasks,
+        "user_algos": plan.user_algos,
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
     if plan.trials is None:  # search: Optuna samples the fields; the trial resolves them (spaces.trial_spec)
@@ -142,7 +154,8 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
     """Run the planned sweep; the plan is all it reads (sweeps/run.py made it from the file and flags)."""
     infra, cpus_per_trial = plan.infra, plan.sweep.cpus_per_trial
     if not ray.is_initialized():  # tests drive sweeps inside their own Ray session
-        ray.init(address=infra.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+        ray.init(address=infra.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR",
+                 runtime_env=worker_env(plan))
     biggest = max((n["Resources"].get("CPU", 0) for n in ray.nodes() if n["Alive"]), default=0)
     if cpus_per_trial > biggest:  # Tune would leave every trial PENDING, silently, forever
         print(f"sweeps/run.py: error: --cpus-per-trial {cpus_per_trial} is more than the largest node of the "

@@ -9,7 +9,8 @@ the line, the key path and what is accepted:
    to, duplicate keys, all bounded before anything is built;
 1. the structure (:meth:`SweepFile.model_validate`): unknown keys (with the closest name), types
    (strict: a boolean is never taken for a number), ranges and counts, names that become paths,
-   one distribution per searched field, an empty grid;
+   one distribution per searched field, an empty grid, an algorithm that is neither a name of the
+   registry nor a user's module (``{module: mypkg.safe_algo}``) that imports and exposes its names;
 2. the fields (:func:`check_fields`): every field in ``set``, ``grid``, ``groups`` and ``search``
    against the declaration of each algorithm the trial runs (lac_rllib/algorithms/registry.py):
    an unknown field (with the closest name), a value or distribution outside what the field
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import builtins
 import difflib
+import os
 import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -37,6 +39,7 @@ from pydantic import (
     Field,
     Tag,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -176,6 +179,23 @@ def _seeds_form(v: Any) -> Any:
     if isinstance(v, (list, tuple)):
         return {"list": v}
     return v
+
+
+def _algo_name(v: Any) -> Any:
+    """``{module: "mypkg.safe_algo"}`` → ``"mypkg.safe_algo"``: a user's algorithm is named by its
+    import path everywhere after the file (trial params, MLflow, checkpoints)."""
+    if not isinstance(v, dict):
+        return v
+    if set(v) != {"module"} or not isinstance(v["module"], str):
+        raise ValueError(f"{excerpt(v)}: accepted: an algorithm's name, or your own algorithm's module as "
+                         "{module: IMPORT.PATH} (docs/baselines.md)")
+    return v["module"]
+
+
+def _search_dirs(info: ValidationInfo | None) -> tuple[str, ...]:
+    """Where a user's module is looked for beyond the Python path (the file's folder, the working
+    directory): handed to validation as its context by :func:`load_with_origin`."""
+    return tuple(((info.context if info else None) or {}).get("search_dirs", ()))
 
 
 class UserEnv(BaseModel):
@@ -325,7 +345,8 @@ class SweepFile(BaseModel):
     list of them; default ``lac/PointHazard-v0``."""
     algo: tuple[str, ...] = (DEFAULT_ALGO,)
     """The algorithm (a name of the registry, lac_rllib/algorithms/registry.py: docs/config.md lists
-    each with its fields) or a list (every configuration runs with each)."""
+    each with its fields; or your own algorithm's module, ``{module: "mypkg.safe_algo"}`` or its
+    import path as a string: docs/baselines.md) or a list (every configuration runs with each)."""
     budget: str | int | None = None
     """Env steps per trial: a named budget (``smoke | quick | paper``, with the overrides that make
     it meaningful: docs/sweeps.md) or a number of env steps in [1, 10¹⁰] (the presets' fields);
@@ -358,10 +379,15 @@ class SweepFile(BaseModel):
     experiment: Annotated[str, AfterValidator(_display_name)] | None = None
     """The MLflow experiment (default ``lac-sweeps``)."""
 
-    @field_validator("task", "algo", mode="before")
+    @field_validator("task", mode="before")
     @classmethod
     def _one_or_list(cls, v):
         return v if isinstance(v, (list, tuple)) or v is None else [v]
+
+    @field_validator("algo", mode="before")
+    @classmethod
+    def _algo_forms(cls, v):
+        return [_algo_name(a) for a in (v if isinstance(v, (list, tuple)) else [v])]
 
     @field_validator("seeds", mode="before")
     @classmethod
@@ -370,13 +396,17 @@ class SweepFile(BaseModel):
 
     @field_validator("algo")
     @classmethod
-    def _algos(cls, v):
-        from lac_rllib.algorithms.registry import ALGOS
+    def _algos(cls, v, info: ValidationInfo):
+        from lac_rllib.algorithms.registry import algos_text, check_algo
 
-        bad = [a for a in v if a not in ALGOS]
-        if bad or not v or len(set(v)) != len(v):
-            raise ValueError(f"{excerpt(bad[0] if bad else list(v))}: accepted: {' | '.join(ALGOS)} "
+        if not v or len(set(v)) != len(v):
+            raise ValueError(f"{excerpt(list(v))}: accepted: {algos_text()} or your own algorithm's module "
                              "(or a list of distinct ones)")
+        for i, algo in enumerate(v):  # a user's module is imported and checked here, before Ray starts
+            try:
+                check_algo(algo, _search_dirs(info))
+            except ValueError as e:
+                raise KeyedError((i,), str(e)) from None
         return v
 
     _budget = field_validator("budget", mode="before")(classmethod(lambda cls, v: _budget_value(v)))
@@ -468,12 +498,14 @@ def load_with_origin(path: str | Path, text: str | None = None) -> tuple[SweepFi
         raise SweepFileError(f"{path}: a sweep file is a mapping of keys (task, algo, grid, ...), not a "
                              f"{type(data).__name__}")
     origin = Origin(path, node)
+    # A user's module (an env factory's, an algorithm's) is looked up beside the file, then here.
+    dirs = tuple(dict.fromkeys((str(path.resolve().parent), os.getcwd())))
     try:
-        sweep = SweepFile.model_validate(data)
+        sweep = SweepFile.model_validate(data, context={"search_dirs": dirs})
     except ValidationError as e:
         raise SweepFileError(first_error(e, origin)) from None
     try:
-        check_fields(sweep)
+        check_fields(sweep, dirs)
     except FieldError as e:
         raise SweepFileError(f"{origin(e.loc)}: {e.message}") from None
     return sweep, origin
@@ -588,48 +620,61 @@ class FieldError(ValueError):
         self.loc, self.message = loc, message
 
 
-def check_fields(sweep: SweepFile) -> None:
+def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
     """Every field the sweep sets, sweeps or searches, against the declaration of each algorithm
-    that runs it (its docstring'd ``param(..., accepts=...)``): raises FieldError at its key path."""
+    that runs it (its docstring'd ``param(..., accepts=...)``): raises FieldError at its key path.
+    A user's algorithm named in ``set``, ``grid`` or ``search`` is looked up in ``search_dirs`` too."""
     from lac_rllib.algorithms.registry import ALGO_FIELD
 
-    top_algos = _algos_of(sweep.algo, sweep.set, {}, ("set",))
+    top_algos = _algos_of(sweep.algo, sweep.set, {}, ("set",), search_dirs)
     if sweep.search is not None:
         algos = top_algos
         if ALGO_FIELD in sweep.search:
             algos = _algos_of(top_algos, {}, {ALGO_FIELD: sweep.search[ALGO_FIELD].values_to_check()},
-                              ("search", ALGO_FIELD))
+                              ("search",), search_dirs)
         _check_set(sweep.set, algos, ("set",))
         for name, dist in sweep.search.items():
             if name != ALGO_FIELD:
                 for value in dist.values_to_check():
                     _check_field(name, value, algos, ("search", name, dist.kind))
         return
-    groups = [("grid", None, Group(grid=sweep.grid))] if sweep.grid is not None else []
-    groups += [(("groups", g), g, grp) for g, grp in (sweep.groups or {}).items()]
-    groups += [(("groups_at", i, "groups", g), g, grp) for i, at in enumerate(sweep.groups_at)
+    groups = [(("grid",), Group(grid=sweep.grid))] if sweep.grid is not None else []
+    groups += [(("groups", g), grp) for g, grp in (sweep.groups or {}).items()]
+    groups += [(("groups_at", i, "groups", g), grp) for i, at in enumerate(sweep.groups_at)
                for g, grp in at.groups.items()]
+    # Each group's algorithms, checked where they are named (its grid, else its set).
+    group_algos = [_algos_of(top_algos, group.set, group.grid,
+                             _grid_loc(where) if ALGO_FIELD in group.grid else _set_loc(where), search_dirs)
+                   for where, group in groups]
     # The sweep's set reaches every trial: each algorithm any group runs must have its fields.
-    run_by_groups = [a for _, _, g in groups for a in _algos_of(top_algos, g.set, g.grid, ("set",))]
-    _check_set(sweep.set, tuple(dict.fromkeys(run_by_groups or top_algos)), ("set",))
-    for where, _, group in groups:
-        where = where if isinstance(where, tuple) else (where,)
-        prefix = where if where == ("grid",) else (*where, "grid")
+    _check_set(sweep.set, tuple(dict.fromkeys(a for algos in group_algos for a in algos)) or top_algos, ("set",))
+    for (where, group), algos in zip(groups, group_algos):
+        prefix = _grid_loc(where)
         if ALGO_FIELD in group.grid and len(sweep.algo) > 1:
             raise FieldError((*prefix, ALGO_FIELD), f"algo is swept here and the sweep's algo is a list "
                                                     f"{list(sweep.algo)}; give one of them")
-        set_loc = (*where, "set") if where != ("grid",) else ("set",)
-        algos = _algos_of(top_algos, group.set, group.grid, prefix if ALGO_FIELD in group.grid else set_loc)
-        _check_set(group.set, algos, set_loc)
+        _check_set(group.set, algos, _set_loc(where))
         for name, values in group.grid.items():
             if name != ALGO_FIELD:
                 for i, value in enumerate(values):
                     _check_field(name, value, algos, (*prefix, name, i))
 
 
-def _algos_of(top: tuple, sets: dict, grid: dict, loc: tuple) -> tuple[str, ...]:
-    """The algorithms a location runs: a swept ``algo``, else a set one, else the sweep's."""
-    from lac_rllib.algorithms.registry import ALGO_FIELD, ALGOS
+def _grid_loc(where: tuple) -> tuple:
+    """The key path of a group's grid (the file's own ``grid`` is its one group's)."""
+    return where if where == ("grid",) else (*where, "grid")
+
+
+def _set_loc(where: tuple) -> tuple:
+    """The key path of a group's set (the file's own ``grid`` has the sweep's)."""
+    return ("set",) if where == ("grid",) else (*where, "set")
+
+
+def _algos_of(top: tuple, sets: dict, grid: dict, loc: tuple, search_dirs: tuple[str, ...] = ()
+              ) -> tuple[str, ...]:
+    """The algorithms a location runs: a swept ``algo``, else a set one, else the sweep's (each
+    checked: a name of the registry or a user's module, lac_rllib/algorithms/registry.py)."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD, check_algo
 
     if ALGO_FIELD in grid:
         algos = tuple(grid[ALGO_FIELD])
@@ -637,9 +682,12 @@ def _algos_of(top: tuple, sets: dict, grid: dict, loc: tuple) -> tuple[str, ...]
         algos = (sets[ALGO_FIELD],)
     else:
         return tuple(top)
-    bad = [a for a in algos if a not in ALGOS]
-    if bad:
-        raise FieldError((*loc, ALGO_FIELD), f"unknown algo {bad[0]!r}; accepted: {' | '.join(ALGOS)}")
+    for i, algo in enumerate(algos):
+        try:
+            check_algo(algo, search_dirs)
+        except ValueError as e:
+            where = (*loc, ALGO_FIELD, i) if ALGO_FIELD in grid else (*loc, ALGO_FIELD)
+            raise FieldError(where, str(e)) from None
     return algos
 
 

@@ -18,7 +18,7 @@ import ray
 from ray import tune
 from ray.tune.result import TIME_TOTAL_S
 
-from lac_rllib.algorithms.registry import build_config, split_algo
+from lac_rllib.algorithms.registry import add_module_dir, build_config, split_algo
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
     ENV_STEPS,
@@ -59,11 +59,14 @@ class SweepTrial(tune.Trainable):
     """One trial. config: ``trial`` (a grid trial's TrialSpec, its fields resolved at plan time)
     or, for a search, ``task``, ``budget``, ``sets``, ``seeds`` and the sampled ``overrides``
     (spaces.trial_spec makes both a TrialSpec); ``timesteps``, ``cpus``, ``user_tasks`` (a user env's
-    TaskSpec as data, registered here), ``tracking`` {uri, experiment, parent_run_id}."""
+    TaskSpec as data, registered here), ``user_algos`` (a user's algorithm → the folder it is
+    imported from), ``tracking`` {uri, experiment, parent_run_id}."""
 
     def setup(self, config: dict) -> None:
         for definition in config.get("user_tasks", {}).values():  # a user's env, registered in this process
             register_definition(definition)
+        for folder in config.get("user_algos", {}).values():  # a user's algorithm, importable in this process
+            add_module_dir(folder)
         self.spec = spec = spaces.trial_spec(config)
         self.timesteps = int(spec.timesteps or config["timesteps"])
         # The trial's algorithm and fields as resolved (spaces.trial_params), run on its CPUs (env

@@ -527,6 +527,19 @@ def test_a_safety_gymnasium_task_new_to_the_registry_runs_a_smoke_trial(ray_sess
     assert [m.value for m in client.get_metric_history(child.info.run_id, "episode_cost")], "an episode completed"
 
 
+def test_a_users_algorithm_s_folder_is_on_the_path_of_every_worker_the_sweep_starts(monkeypatch):
+    """Env runners of a trial of several CPUs unpickle its config classes: the job's PYTHONPATH has
+    the folder (the user's own PYTHONPATH kept after it); a sweep of the package's algorithms adds none."""
+    from types import SimpleNamespace
+
+    from sweeps.sweep import worker_env
+
+    monkeypatch.setenv("PYTHONPATH", "/site/extra")
+    assert worker_env(SimpleNamespace(user_algos={})) is None
+    env = worker_env(SimpleNamespace(user_algos={"mine.a": "/mine", "mine.b": "/mine", "other": "/other"}))
+    assert env == {"env_vars": {"PYTHONPATH": os.pathsep.join(["/mine", "/other", "/site/extra"])}}
+
+
 @pytest.mark.parametrize("searcher", [s for s in SEARCHERS if s != "grid"])
 def test_every_searcher_survives_tunes_pickling(tmp_path, searcher):
     """Tune pickles its search algorithm into the experiment state when the Tuner is built: a
@@ -549,3 +562,45 @@ def test_every_searcher_survives_tunes_pickling(tmp_path, searcher):
                                 if searcher in MULTI_OBJECTIVE else ["maximize"])
     study.optimize(lambda t: [t.suggest_float("x", 0, 1)] * len(study.directions), n_trials=3)
     assert len(study.trials) == 3
+
+
+@pytest.mark.slow
+def test_a_users_own_algorithm_runs_through_the_sweep_mlflow_the_report_and_lac_eval(ray_session, tmp_path, capsys):
+    """A throwaway algorithm under tests/ (tests/algorithms/toy_algo.py: PPO-Lag's pieces, a field and
+    smoke sizes of its own), named by its module path in a sweep file: its trial runs at its own
+    sizes, reports its own key every iteration, lands in MLflow and the report by its path, and
+    lac-eval imports it again from the checkpoint's name. No code of the package knows it."""
+    from lac_rllib.algorithms import registry
+    from sweeps import evaluate
+
+    toy = "tests.algorithms.toy_algo"
+    code = [*REPO.glob("lac_rllib/**/*.py"), *REPO.glob("sweeps/**/*.py"), *REPO.glob("sweeps/builtin/*.yaml"),
+            *REPO.glob("benchmarks/*.py")]
+    assert not [p for p in code if "toy_algo" in p.read_text()]
+    path = tmp_path / "mine.yaml"
+    path.write_text(f"algo: {{module: {toy}}}\nbudget: smoke\nseeds: 1\nset: {{toy_marker: 2.5}}\n")
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    args = cli.parse_args(["--config", str(path), "--experiment", "test", "--tracking-uri", uri,
+                           "--storage", str(tmp_path / "rr")])
+    assert _sweep(tmp_path, args) == 0
+    client, (parent,), (child,) = _runs(tmp_path)
+    p = child.data.params
+    assert child.info.status == "FINISHED" and p["algo"] == toy and child.data.tags["lac.algo"] == toy
+    # Its own field and its own smoke sizes (PPO-Lag's smoke runs (32, 32) on 500-step iterations).
+    assert (p["toy_marker"], p["hidden"], p["train_batch_size_per_learner"]) == ("2.5", "[16, 16]", "400")
+    markers = client.get_metric_history(child.info.run_id, "toy_marker")  # its own reported key, every row
+    steps = [m.step for m in client.get_metric_history(child.info.run_id, "episode_cost")]
+    assert [m.value for m in markers] == [2.5] * 5 and [m.step for m in markers] == steps == [400 * i for i in
+                                                                                                range(1, 6)]
+    note = parent.data.tags["mlflow.note.content"]
+    assert "1 of 1 trials finished" in note and f"| mine | {toy}-mine-PointHazard-v0 (default) | 1 |" in note, note
+    # lac-eval, as in a fresh process: the module is imported again by the path the checkpoint names.
+    registry._USER.pop(toy)
+    sys.modules.pop(toy)
+    capsys.readouterr()
+    rc = evaluate.main(["--run-id", child.info.run_id, "--tracking-uri", uri, "--episodes", "3", "--json",
+                        "--no-progress"])
+    out = capsys.readouterr().out
+    result = json.loads(out.strip().splitlines()[-1])
+    assert rc == 0 and (result["algo"], result["episodes"], len(result["returns"])) == (toy, 3, 3), out
+    assert toy in sys.modules and "eval/generator/return_mean" in client.get_run(child.info.run_id).data.metrics

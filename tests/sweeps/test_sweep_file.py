@@ -3,6 +3,7 @@ file is refused before Ray starts with one line naming the file, the key and wha
 
 import itertools
 import re
+import sys
 import textwrap
 from pathlib import Path
 
@@ -217,3 +218,64 @@ def test_a_user_module_beside_the_sweep_file_is_found(tmp_path, monkeypatch):
     text = "task: {factory: 'beside_envs:make_safe', cost_limit: 5, cost_key: violation}\n"
     plan = _plan(tmp_path, monkeypatch, "--config", str(_write(tmp_path, text)))
     assert plan.user_tasks[plan.task]["kwargs"]["module_path"] == str(tmp_path)
+
+
+# ---------------------------------------------------------------- a user's own algorithm (tests/algorithms/toy_algo.py)
+TOY = "tests.algorithms.toy_algo"
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_a_users_algorithm_named_by_module_is_planned_with_its_own_fields_and_sizes(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(REPO))
+    text = f"algo: {{module: {TOY}}}\nbudget: smoke\nseeds: 2\nset: {{toy_marker: 2.5}}\n"
+    plan = _plan(tmp_path, monkeypatch, "--config", str(_write(tmp_path, text)))
+    assert [t.algo for t in plan.trials] == [TOY, TOY] and plan.sweep.algo == (TOY,)
+    params = plan.trials[0].params
+    assert (params["toy_marker"], params["hidden"], params["train_batch_size_per_learner"]) == (2.5, (16, 16), 400)
+    assert plan.user_algos == {TOY: str(REPO)}  # the folder its trials import it from
+    assert plan.trials[0].config_label() == f"{TOY}-my-PointHazard-v0"
+    # The resolved sweep names it by its path, and reruns the same trials.
+    replay = _plan(tmp_path, monkeypatch, "--config", str(_write(tmp_path, plan.sweep.dump())))
+    assert [t.params for t in replay.trials] == [t.params for t in plan.trials]
+    # Beside a built-in one, in a grid, by the same path.
+    both = _plan(tmp_path, monkeypatch, "--config", str(_write(tmp_path, f"grid: {{algo: [ppo_lag, {TOY}]}}\n"
+                                                                         "budget: smoke\nseeds: 1\n")))
+    assert [t.algo for t in both.trials] == ["ppo_lag", TOY] and "toy_marker" not in both.trials[0].params
+
+
+def test_a_users_algorithm_beside_the_sweep_file_is_found(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    (tmp_path / "beside_algo.py").write_text((REPO / "tests" / "algorithms" / "toy_algo.py").read_text())
+    plan = _plan(tmp_path, monkeypatch, "--config", str(_write(tmp_path, "algo: {module: beside_algo}\nseeds: 1\n"
+                                                                         "budget: smoke\n")))
+    assert plan.trials[0].algo == "beside_algo" and plan.user_algos == {"beside_algo": str(tmp_path)}
+
+
+BAD_ALGO = [
+    ("algo: {module: nowhere.algo}\n", r"my.yaml:1: algo\[0\]: unknown algo 'nowhere.algo'; accepted: lac \| ppo_lag "
+                                       r"\| sac_lag, or the import path of your own algorithm's module"),
+    ("algo:\n  - lac\n  - {module: half_algo}\n",
+     r"my.yaml:3: algo\[1\]: algo half_algo: its module lacks PARAMS, FIELDS"),
+    ("algo: {modul: half_algo}\n", r"my.yaml:1: algo: \{'modul': 'half_algo'\}: accepted: an algorithm's name, or "
+                                   r"your own algorithm's module as \{module: IMPORT.PATH\}"),
+    ("grid:\n  algo: [lac, broken_algo]\n", r"my.yaml:2: grid.algo\[1\]: algo broken_algo: cannot be imported "
+                                            r"\(RuntimeError: needs a GPU\)"),
+    ("search:\n  algo: {choice: [lac, nowhere.algo]}\n", r"my.yaml:2: search.algo\[1\]: unknown algo 'nowhere.algo'"),
+]
+
+
+@pytest.mark.parametrize("text,needle", BAD_ALGO)
+def test_a_users_algorithm_that_cannot_run_is_one_line_before_ray(tmp_path, monkeypatch, capsys, text, needle):
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    (tmp_path / "half_algo.py").write_text("CONFIG_CLASS = object\nACTIONS = ('generator',)\n")
+    (tmp_path / "broken_algo.py").write_text("raise RuntimeError('needs a GPU')\n")
+    test_a_bad_file_is_one_line_naming_the_key_before_ray(tmp_path, monkeypatch, capsys, text, needle)
+
+
+def test_set_algo_names_a_users_module_or_says_which_flag_was_wrong(tmp_path, monkeypatch):
+    with pytest.raises(ValueError, match=r"^--set algo: unknown algo 'nowhere.algo'; accepted: lac"):
+        _plan(tmp_path, monkeypatch, "--space", "paper", "--set", "algo=nowhere.algo")
+    monkeypatch.syspath_prepend(str(REPO))
+    plan = _plan(tmp_path, monkeypatch, "--space", "paper", "--task", "lac/PointHazard-v0", "--seeds", "1",
+                 "--set", f"algo={TOY}")
+    assert plan.trials[0].algo == TOY and plan.sweep.algo == (TOY,) and plan.user_algos == {TOY: str(REPO)}
