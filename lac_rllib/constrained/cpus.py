@@ -5,6 +5,24 @@ sweep's ``--cpus-per-trial``. The config has ``num_envs_per_env_runner`` and ``t
 
 from __future__ import annotations
 
+import torch
+from ray.rllib.callbacks.callbacks import RLlibCallback
+from ray.rllib.utils.annotations import override
+
+
+class OneThreadPerEnvRunner(RLlibCallback):
+    """Each remote env runner's torch ops on one thread, whatever ``OMP_NUM_THREADS`` the run was
+    started with. Ray hands its actors the driver's ``OMP_NUM_THREADS`` when it is set, and a run
+    on 2 CPUs started with 2 spun two OpenMP threads per runner: four threads on two cores, half the
+    time in the kernel, 72-77 s per PointGoal1 iteration against 40-45 s (docs/speed.md). Set in
+    each runner when its env is made (RLlib's per-runner hook); the driver's own runner (no remote
+    runners) keeps the learner's ``torch_threads``."""
+
+    @override(RLlibCallback)
+    def on_environment_created(self, *, env_runner, **kwargs) -> None:
+        if env_runner.worker_index > 0:
+            torch.set_num_threads(1)
+
 
 def set_runners(config, num_env_runners: int, cpus: int) -> None:
     """``num_env_runners`` remote env runners (0: sample in the driver), or the run on ``cpus`` CPUs

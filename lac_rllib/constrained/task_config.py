@@ -14,6 +14,7 @@ from typing import Any
 from ray.tune.registry import register_env
 
 from lac_rllib.constrained.costs import EpisodeCostCallback
+from lac_rllib.constrained.cpus import OneThreadPerEnvRunner
 from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, or_none, param
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
@@ -77,7 +78,7 @@ class SafeTaskConfig:
         # already do), leaving the iteration short of data. A dead runner is found by RLlib's
         # fault tolerance, not by this timeout.
         self.sample_timeout_s = None
-        self.callbacks_class = EpisodeCostCallback
+        self.callbacks_class = [EpisodeCostCallback, OneThreadPerEnvRunner]
         # RLlib's per-tensor NaN/inf tests off: our learners make the same guard in one test per
         # gradient step (constrained/gradients.py: 9% of a SAC-Lag step was those tests).
         self.torch_skip_nan_gradients = True

@@ -1,0 +1,32 @@
+"""constrained/cpus.py: each remote env runner's torch ops on one thread, whatever the run's
+OMP_NUM_THREADS (a 2-CPU run started with 2 ran at half speed: docs/speed.md)."""
+
+import types
+
+import pytest
+import torch
+
+from lac_rllib.algorithms.registry import ALGOS, build_config
+from lac_rllib.constrained.cpus import OneThreadPerEnvRunner
+
+
+@pytest.fixture
+def threads():
+    before = torch.get_num_threads()
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.mark.parametrize("worker_index, expected", [(1, 1), (2, 1), (0, 2)])
+def test_remote_env_runners_get_one_thread_the_drivers_keeps_its_own(threads, worker_index, expected):
+    torch.set_num_threads(2)  # as OMP_NUM_THREADS=2 leaves a Ray actor
+    OneThreadPerEnvRunner().on_environment_created(env_runner=types.SimpleNamespace(worker_index=worker_index),
+                                                   env=None, env_context=None, metrics_logger=None)
+    assert torch.get_num_threads() == expected
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_every_algorithm_runs_the_hook_on_its_env_runners(algo):
+    config = build_config(algo, "lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 2}, timesteps=100_000, cpus=2)
+    assert OneThreadPerEnvRunner in config.callbacks_class
+    assert config.num_env_runners == 2
