@@ -276,7 +276,7 @@ def time_algorithm(algo: str, task: str, seed: int, steps: int, cpus: int = 1, t
         per_call = float("nan")
         if hasattr(algo_obj, "replay_buffer"):  # one update call of one minibatch, timed
             t1 = time.perf_counter()
-            algo_obj.update_from_replay(minibatch_size=256, num_minibatches=1, timesteps={})
+            algo_obj.update_from_replay(minibatch_size=256, num_total_minibatches=1, timesteps={})
             per_call = time.perf_counter() - t1
     finally:
         algo_obj.stop()

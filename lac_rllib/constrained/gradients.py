@@ -1,5 +1,7 @@
-"""RLlib's non-finite gradient guard, checked once per gradient step instead of once per tensor.
+"""What every learner does to gradients and weights between the backward pass and the next step:
+RLlib's non-finite gradient guard (checked once per step), the global-norm clip and Polyak averaging.
 
+The guard:
 TorchLearner.apply_gradients (ray 2.60) tests ``torch.isfinite(grad).all()`` for every parameter's
 gradient, and again for every parameter before each optimizer's step: each test reads its result
 back to Python. At the baselines' network sizes that is 9% of a SAC-Lag gradient step and ~5% of a
@@ -8,6 +10,12 @@ PPO-Lag one (cProfile, PointGoal1 presets: docs/speed.md). Our configs set RLlib
 :func:`zero_non_finite_` before ``super().apply_gradients``: one test over all gradients, and where
 it fails RLlib's own treatment, ``torch.nan_to_num`` of each non-finite gradient with RLlib's
 warning. For finite gradients (every step of a healthy run) the update is the same, bit for bit.
+
+:func:`clip_global_norm_` and :func:`polyak_` are RLlib's ``clip_gradients(grad_clip_by=
+"global_norm")`` and ``update_target_network`` in the same arithmetic, bit for bit
+(tests/constrained/test_gradients.py), with torch's multi-tensor (foreach) ops: a few calls per
+network instead of a few per tensor (RLlib's Polyak goes through two state dicts and a
+``load_state_dict``). Every algorithm clips and averages through them.
 
 Plain torch, no RLlib.
 """
@@ -39,3 +47,47 @@ def zero_non_finite_(gradients_dict: dict) -> list:
         logger.warning("Gradients %s contain nan/inf values; set to finite values (torch.nan_to_num), as "
                        "RLlib's TorchLearner does.", bad)
     return bad
+
+
+@torch.no_grad()
+def clip_global_norm_(grads: list, max_norm: float) -> torch.Tensor:
+    """Scale ``grads`` in place so that their joint L2 norm is at most ``max_norm``; returns the
+    norm before clipping. RLlib's global-norm clip (``clip_gradients``), the same arithmetic:
+    coefficient ``max_norm / max(norm + 1e-6, max_norm)`` (≤ 1, exactly 1 below the bound), per-tensor
+    norms (RLlib's and torch's ``clip_grad_norm_``'s) made non-finite-safe as RLlib does."""
+    return clip_global_norms_([grads], max_norm)[0]
+
+
+@torch.no_grad()
+def clip_global_norms_(groups: list, max_norm: float) -> list:
+    """:func:`clip_global_norm_` of each group of gradients (one network's, one optimizer's) on its
+    own, all groups in one pass: one foreach norm and one multiply over every tensor."""
+    groups = [[g for g in grads if g is not None] for grads in groups]
+    flat = [g for grads in groups for g in grads]
+    if not flat:
+        return [torch.tensor(0.0) for _ in groups]
+    norms = torch.stack(torch._foreach_norm(flat, 2.0)).nan_to_num(neginf=-10e8, posinf=10e8)
+    totals, coefs, start = [], [], 0
+    for grads in groups:
+        total = (torch.linalg.vector_norm(norms[start:start + len(grads)], 2.0).nan_to_num(neginf=-10e8, posinf=10e8)
+                 if grads else torch.tensor(0.0))
+        coef = torch.clamp(max_norm / torch.clamp(total + 1e-6, min=max_norm), max=1.0)
+        totals.append(total)
+        coefs.extend([coef] * len(grads))
+        start += len(grads)
+    torch._foreach_mul_(flat, coefs)
+    return totals
+
+
+@torch.no_grad()
+def polyak_(pairs, tau: float) -> None:
+    """θ' ← τ·θ + (1 − τ)·θ' for every (main, target) network pair, in place: RLlib's
+    ``update_target_network`` formula and rounding (the two products, then their sum)."""
+    mains, targets = [], []
+    for main_net, target_net in pairs:
+        mains.extend(main_net.parameters())
+        targets.extend(target_net.parameters())
+    if mains:
+        scaled = torch._foreach_mul(mains, tau)
+        torch._foreach_mul_(targets, 1 - tau)
+        torch._foreach_add_(targets, scaled)

@@ -70,19 +70,17 @@ class OffPolicySafeAlgorithm(SafeAlgorithm):
         self.replay_buffer.add(episodes)
         return returns, costs
 
-    def update_from_replay(self, *, minibatch_size: int, num_minibatches: int, timesteps: dict,
-                           **update_kwargs) -> None:
-        """One ``learner_group.update`` of ``num_minibatches`` minibatches over the whole buffer
-        (the learner connector shuffles its rows), then the new weights to the env runners.
-        ``update_kwargs`` go to ``learner_group.update`` (e.g. ``num_epochs``, ``shuffle_batch_per_epoch``)."""
+    def update_from_replay(self, *, timesteps: dict, **update_kwargs) -> None:
+        """One ``learner_group.update`` over the whole buffer (the learner connector shuffles or
+        draws its rows), then the new weights to the env runners. ``update_kwargs`` go to
+        ``learner_group.update`` (``minibatch_size``, ``num_total_minibatches``, ``num_epochs``,
+        ``shuffle_batch_per_epoch``, as constrained/minibatch_loop.py's ``update_kwargs`` gives them)."""
         learner_results = self.learner_group.update(
             # Shallow copies: the learner connector renames episode ids in place
             # (AddObservationsFromEpisodesToBatch appends "_i"), which would break the
             # buffer's id → episode map when the next chunk of an ongoing episode arrives.
             episodes=[copy.copy(e) for e in self.replay_buffer.episodes],
             timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: self.lifetime_env_steps, **timesteps},
-            minibatch_size=minibatch_size,
-            num_total_minibatches=num_minibatches,
             **update_kwargs,
         )
         self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)

@@ -1,12 +1,13 @@
 """constrained/gradients.py: RLlib's NaN/inf gradient guard in one test per step, the same update."""
 
+import copy
 import logging
 
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
 from lac_rllib.algorithms.sac_lag.config import build_config
-from lac_rllib.constrained.gradients import zero_non_finite_
+from lac_rllib.constrained.gradients import clip_global_norm_, clip_global_norms_, polyak_, zero_non_finite_
 from lac_rllib.tasks import get_task
 
 
@@ -59,3 +60,49 @@ def test_the_step_equals_rllibs_own_guard_with_one_nan_gradient(one_torch_thread
                     rllib.module[DEFAULT_MODULE_ID].reward_critics.parameters()):
         assert torch.isfinite(a).all()
         assert torch.equal(a, b)
+
+
+def test_the_global_norm_clip_is_rllibs_bit_for_bit():
+    """clip_global_norm_ against RLlib's clip_gradients(grad_clip_by="global_norm") on gradients
+    from 1e-3 to 1e3 in scale (clipped and not), returning the same norm."""
+    from ray.rllib.utils.torch_utils import clip_gradients
+
+    gen = torch.Generator().manual_seed(0)
+    clipped = 0
+    for trial in range(60):
+        shapes = [(64, 60), (64,), (64, 64), (64,), (4, 64), (4,)]
+        grads = [torch.randn(s, generator=gen) * 10.0 ** (trial % 7 - 3) for s in shapes]
+        ref = {i: g.clone() for i, g in enumerate(grads)}
+        ours = [g.clone() for g in grads]
+        ref_norm = clip_gradients(ref, grad_clip=0.5, grad_clip_by="global_norm")
+        norm = clip_global_norm_(ours, 0.5)
+        assert torch.equal(norm, ref_norm)
+        assert all(torch.equal(a, b) for a, b in zip(ref.values(), ours))
+        # Per group in one pass (one optimizer's gradients each): each group's own clip.
+        split = [[g.clone() for g in grads[:2]], [g.clone() for g in grads[2:]]]
+        refs = [{i: g.clone() for i, g in enumerate(part)} for part in split]
+        ref_norms = [clip_gradients(r, grad_clip=0.5, grad_clip_by="global_norm") for r in refs]
+        assert all(torch.equal(a, b) for a, b in zip(clip_global_norms_(split, 0.5), ref_norms))
+        assert all(torch.equal(a, b) for r, part in zip(refs, split) for a, b in zip(r.values(), part))
+        clipped += bool(norm > 0.5)
+    assert 0 < clipped < 60  # both sides of the bound were exercised
+
+
+def test_polyak_is_rllibs_update_target_network_bit_for_bit():
+    from ray.rllib.utils.torch_utils import update_target_network
+
+    torch.manual_seed(0)
+    make = lambda: torch.nn.Sequential(torch.nn.Linear(9, 32), torch.nn.ReLU(), torch.nn.Linear(32, 1))  # noqa: E731
+    mains, targets = [make(), make()], [make(), make()]
+    ours = [copy.deepcopy(t) for t in targets]
+    for _ in range(20):
+        for m, t in zip(mains, targets):
+            update_target_network(main_net=m, target_net=t, tau=0.005)
+        polyak_(zip(mains, ours), 0.005)
+        with torch.no_grad():
+            for m in mains:
+                for p in m.parameters():
+                    p.add_(torch.randn_like(p))
+    for t, o in zip(targets, ours):
+        assert all(torch.equal(a, b) for a, b in zip(t.parameters(), o.parameters()))
+    assert not torch.equal(next(targets[0].parameters()), next(make().parameters()))

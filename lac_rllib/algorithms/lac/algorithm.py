@@ -34,7 +34,7 @@ class LAC(OffPolicySafeAlgorithm):
         n_rows = self.replay_buffer.get_num_timesteps()
         self.update_from_replay(
             minibatch_size=cfg.lac_minibatch_size,
-            num_minibatches=max(1, int(cfg.gradient_passes * n_rows / cfg.lac_minibatch_size)),
+            num_total_minibatches=max(1, int(cfg.gradient_passes * n_rows / cfg.lac_minibatch_size)),
             # eq. (14) uses only episodes that completed in this batch [C].
             timesteps={TS_MEAN_EPISODE_COST: float(np.mean(costs)) if costs else None, TS_ITERATION: self.iteration},
         )

@@ -39,6 +39,7 @@ from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
 from lac_rllib.constrained.algorithm import SafeAlgorithm
 from lac_rllib.constrained.costs import completed_episode_stats
 from lac_rllib.constrained.metrics import TS_ITERATION
+from lac_rllib.constrained.minibatch_loop import update_kwargs
 
 
 class PPOLag(SafeAlgorithm, PPO):
@@ -63,10 +64,16 @@ class PPOLag(SafeAlgorithm, PPO):
         # it truncated, so afterwards every chunk would look complete.
         returns, costs = completed_episode_stats(episodes)
 
+        # minibatch_size None: full-batch epochs (RLlib then cycles minibatches of the batch's env
+        # steps; the fused loop takes plans of a set size only).
+        loop = cfg.update_path if cfg.minibatch_size else "rllib"
+        passes = update_kwargs(loop, minibatch_size=cfg.minibatch_size, num_epochs=cfg.num_epochs,
+                               shuffle=cfg.shuffle_batch_per_epoch)
         with self.metrics.log_time((TIMERS, LEARNER_UPDATE_TIMER)):
             learner_results = self.learner_group.update(
                 episodes=episodes,
                 timesteps={
+                    **passes.pop("timesteps"),
                     NUM_ENV_STEPS_SAMPLED_LIFETIME: self.metrics.peek((ENV_RUNNER_RESULTS,
                                                                        NUM_ENV_STEPS_SAMPLED_LIFETIME)),
                     NUM_MODULE_STEPS_TRAINED_LIFETIME: self.metrics.peek(
@@ -74,8 +81,7 @@ class PPOLag(SafeAlgorithm, PPO):
                     TS_EPISODE_COSTS: costs,
                     TS_ITERATION: self.iteration,
                 },
-                num_epochs=cfg.num_epochs, minibatch_size=cfg.minibatch_size,
-                shuffle_batch_per_epoch=cfg.shuffle_batch_per_epoch,
+                **passes,
             )
             self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
 

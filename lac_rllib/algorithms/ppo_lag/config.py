@@ -40,6 +40,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
 from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 POLICY_LR_SCHEDULES = ("linear", "constant")
@@ -143,6 +144,11 @@ class PPOLagParams(SafeTaskParams):
     """Envs each env runner steps together (RLlib's field) [D]: the same episodes, cheaper per step."""
     torch_threads: int = param(1, accepts=INT_GE_1)
     """Intra-op torch threads of the learner process [D]; a sweep sets it to the CPUs of a trial."""
+    update_path: str = param("fused", accepts=one_of(UPDATE_PATHS))
+    """How an update call walks its minibatches [D]: "fused", inside one learner ``_update`` (the
+    same rows in the same order and the same maths, bit for bit; lac_rllib/constrained/minibatch_loop.py),
+    or "rllib", RLlib's iterator calling ``_update`` once per minibatch (~2x slower at 64-row
+    minibatches: docs/speed.md). Speed only."""
 
 
 OMNISAFE_BUDGET = 10_000_000  # env steps of OmniSafe's on-policy benchmark runs [O PPOLag.yaml total_steps]
@@ -285,7 +291,7 @@ CONFIG_CLASS, PARAMS = PPOLagConfig, PPOLagParams
 #: What ``lac-eval --actions`` accepts for a PPO-Lag policy: its mean action.
 ACTIONS = ("generator",)
 #: Fields that set how fast a run goes, not what it learns.
-SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads"})
+SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads", "update_path"})
 #: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any
 #: other): smoke at LAC's smoke sizes; quick on the paper's tasks 64-wide nets, one env, 2k-step
 #: iterations as LAC's (on the tiny task its own tiny preset is the quick budget).

@@ -21,6 +21,14 @@ one pass over the iteration's batch):
    minibatch that starts past an epoch's last row: RLlib's MiniBatchCyclicIterator fills every
    minibatch, so one that straddles an epoch's end trains before the check (OmniSafe's last
    minibatch of an epoch is short instead).
+
+Two paths to the same update, bit for bit (``update_path``; tests/algorithms/test_update_path.py):
+"rllib" is RLlib's own (its minibatch iterator, its PPO loss, torch's Adam, its clip); "fused", the
+default, runs the minibatches inside one ``_update`` (constrained/minibatch_loop.py) and makes each
+step in fewer calls: RLlib's loss terms computed here with their statistics on the reported
+minibatch only, the critics' L2 gradient added in closed form, the three networks' clips and Adam
+steps each in one pass of foreach ops (constrained/gradients.py, constrained/optim.py). ~2x
+faster at 64-row minibatches (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -32,13 +40,20 @@ from typing import Any
 
 import numpy as np
 import torch
+from ray.rllib.algorithms.ppo.ppo import (
+    LEARNER_RESULTS_KL_KEY,
+    LEARNER_RESULTS_VF_EXPLAINED_VAR_KEY,
+    LEARNER_RESULTS_VF_LOSS_UNCLIPPED_KEY,
+)
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
 from ray.rllib.core.columns import Columns
+from ray.rllib.core.learner.learner import ENTROPY_KEY, POLICY_LOSS_KEY, VF_LOSS_KEY
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
+from ray.rllib.utils.torch_utils import explained_variance
 
 from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
-from lac_rllib.constrained.gradients import zero_non_finite_
+from lac_rllib.constrained.gradients import clip_global_norms_, zero_non_finite_
 from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier
 from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, declared with every other)
     COST_VF_LOSS,
@@ -48,6 +63,8 @@ from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, d
     NU,
     TS_EPISODE_COSTS,
 )
+from lac_rllib.constrained.minibatch_loop import FusedMinibatchLoop
+from lac_rllib.constrained.optim import ForeachAdam, step_adams
 
 POLICY, CRITIC, COST_CRITIC = "policy", "critic", "cost_critic"  # optimizer names, one per network
 NETWORKS = (POLICY, CRITIC, COST_CRITIC)
@@ -90,7 +107,7 @@ class EpochProgress:
     kl: float = float("nan")  # KL at the last check
 
 
-class PPOLagTorchLearner(PPOTorchLearner):
+class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
     @override(PPOTorchLearner)
     def build(self) -> None:
         torch.set_num_threads(self.config.torch_threads)
@@ -119,9 +136,10 @@ class PPOLagTorchLearner(PPOTorchLearner):
             CRITIC: ([module.encoder.critic_encoder, module.vf], config.critic_lr),
             COST_CRITIC: ([module.cost_vf], config.critic_lr),
         }
+        adam = ForeachAdam if config.update_path == "fused" else torch.optim.Adam  # the same steps
         for name, (parts, lr) in networks.items():
             params = [p for part in parts for p in self.get_parameters(part)]
-            self.register_optimizer(module_id=module_id, optimizer_name=name, optimizer=torch.optim.Adam(params),
+            self.register_optimizer(module_id=module_id, optimizer_name=name, optimizer=adam(params),
                                     params=params, lr_or_lr_schedule=lr)
 
     # ----- ν, once per iteration before the gradient steps -----
@@ -147,15 +165,63 @@ class PPOLagTorchLearner(PPOTorchLearner):
         self.check_kl_at_epoch_end(module_id, config, module, minibatch_rows=len(batch[Columns.LOSS_MASK]))
         nu = module.nu.detach()
         advantages = (batch[Postprocessing.ADVANTAGES] - nu * batch[COST_ADVANTAGES]) / (1.0 + nu)
+        if config.update_path == "fused":
+            return self.fused_loss(module_id, config, module, batch, fwd_out, advantages)
         loss = super().compute_loss_for_module(module_id=module_id, config=config, fwd_out=fwd_out,
                                                batch={**batch, Postprocessing.ADVANTAGES: advantages})
         mask = batch[Columns.LOSS_MASK]
         cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[mask].mean()
         loss = loss + config.vf_loss_coeff * cost_vf_loss
         if config.critic_l2:
-            critics = (module.encoder.critic_encoder, module.vf, module.cost_vf)
-            loss = loss + config.critic_l2 * sum((p**2).sum() for net in critics for p in net.parameters())
+            loss = loss + config.critic_l2 * sum((p**2).sum() for p in critic_parameters(module))
         self.metrics.log_value((module_id, COST_VF_LOSS), cost_vf_loss.detach(), window=1)
+        return loss
+
+    def fused_loss(self, module_id, config, module, batch, fwd_out, advantages) -> torch.Tensor:
+        """:meth:`compute_loss_for_module`'s loss on the fused path: RLlib's PPO loss
+        (ppo_torch_learner.py, the arithmetic of its terms kept) on the Lagrangian advantage
+        [O PPOLag._compute_adv_surrogate], plus the cost critic's MSE; the critics' L2
+        [O use_critic_norm] is left to :meth:`compute_gradients`. RLlib's loss is computed here
+        rather than called: PPO-Lag pins what it leaves out (no KL penalty, entropy_coeff 0 [O, S],
+        the value clip at inf unless set), and its statistics are computed on the minibatch whose
+        values are reported only (``reports_minibatch``; RLlib logs every minibatch with window 1,
+        keeping the last)."""
+        mask = batch[Columns.LOSS_MASK]
+        num_valid = torch.sum(mask)
+
+        def masked_mean(x: torch.Tensor) -> torch.Tensor:  # RLlib's possibly_masked_mean
+            return torch.sum(x[mask]) / num_valid
+
+        dist = module.get_train_action_dist_cls().from_logits(fwd_out[Columns.ACTION_DIST_INPUTS])
+        logp_ratio = torch.exp(dist.logp(batch[Columns.ACTIONS]) - batch[Columns.ACTION_LOGP])
+        surrogate = torch.min(advantages * logp_ratio,
+                              advantages * torch.clamp(logp_ratio, 1 - config.clip_param, 1 + config.clip_param))
+        values = module.compute_values(batch, embeddings=fwd_out.get(Columns.EMBEDDINGS))
+        vf_loss = torch.pow(values - batch[Postprocessing.VALUE_TARGETS], 2.0)
+        # A square is >= 0, so clamp(·, 0, inf) is the identity, forward and backward.
+        vf_loss_clipped = vf_loss if math.isinf(config.vf_clip_param) else torch.clamp(vf_loss, 0, config.vf_clip_param)
+        per_row = -surrogate + config.vf_loss_coeff * vf_loss_clipped
+        if config.entropy_coeff:  # 0 in every preset: RLlib's term is then 0·H (its gradient 0)
+            per_row = per_row - self.entropy_coeff_schedulers_per_module[module_id].get_current_value() * dist.entropy()
+        loss = masked_mean(per_row)
+        cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[mask].mean()
+        loss = loss + config.vf_loss_coeff * cost_vf_loss
+        # critic_l2·Σθ² [O use_critic_norm] is not in this graph: compute_gradients adds its
+        # gradient critic_l2·2θ after the backward pass (its value to the reported loss only).
+        if self.reports_minibatch:
+            with torch.no_grad():
+                self.metrics.log_dict({
+                    POLICY_LOSS_KEY: -masked_mean(surrogate),
+                    VF_LOSS_KEY: masked_mean(vf_loss_clipped),
+                    LEARNER_RESULTS_VF_LOSS_UNCLIPPED_KEY: masked_mean(vf_loss),
+                    LEARNER_RESULTS_VF_EXPLAINED_VAR_KEY: explained_variance(
+                        batch[Postprocessing.VALUE_TARGETS], values),
+                    ENTROPY_KEY: masked_mean(dist.entropy()),
+                    LEARNER_RESULTS_KL_KEY: torch.tensor(0.0),
+                    COST_VF_LOSS: cost_vf_loss,
+                }, key=module_id, window=1)
+                l2 = config.critic_l2 * sum((p**2).sum() for p in critic_parameters(module)) if config.critic_l2 else 0
+            loss = loss + l2  # a constant here: the reported loss is the whole loss, its gradient unchanged
         return loss
 
     # ----- the KL early stop -----
@@ -187,20 +253,50 @@ class PPOLagTorchLearner(PPOTorchLearner):
                 for _, optim in self.get_optimizers_for_module(mid):
                     optim.zero_grad(set_to_none=True)
             return {}
-        return super().compute_gradients(loss_per_module, **kwargs)
+        grads = super().compute_gradients(loss_per_module, **kwargs)
+        for mid in loss_per_module:
+            config = self.config.get_config_for_module(mid)
+            if config.update_path == "fused" and config.critic_l2:
+                add_l2_gradient_(critic_parameters(self.module[mid].unwrapped()), config.critic_l2)
+        return grads
+
+    @override(PPOTorchLearner)
+    def postprocess_gradients_for_module(self, *, module_id, config, module_gradients_dict):
+        """Each optimizer's gradients clipped to a global norm of ``grad_clip`` [O max_grad_norm]
+        and its norm logged, as RLlib's Learner does; on the fused path the three clips in one pass
+        (:func:`clip_global_norms_`, RLlib's arithmetic)."""
+        if config.update_path != "fused":
+            return super().postprocess_gradients_for_module(module_id=module_id, config=config,
+                                                            module_gradients_dict=module_gradients_dict)
+        if not config.grad_clip:  # None or 0: RLlib's Learner does not clip either
+            return dict(module_gradients_dict)
+        named = [(name, self.filter_param_dict_for_optimizer(param_dict=module_gradients_dict, optimizer=optim))
+                 for name, optim in self.get_optimizers_for_module(module_id)]
+        norms = clip_global_norms_([list(grads.values()) for _, grads in named], config.grad_clip)
+        if self.reports_minibatch:
+            for (name, _), norm in zip(named, norms):
+                self.metrics.log_value((module_id, f"gradients_{name}_global_norm"), norm, window=1)
+        return {ref: g for _, grads in named for ref, g in grads.items()}
 
     @override(PPOTorchLearner)
     def apply_gradients(self, gradients_dict) -> None:
+        """The KL early stop's networks left out (their .grad None: Adam skips them, moments
+        included), RLlib's NaN/inf guard, then the optimizers' steps: TorchLearner's, or on the
+        fused path every network's Adam in one pass (:func:`step_adams`, the same steps)."""
         grads = dict(gradients_dict)
         for mid in self.module.keys():
             for name in self.stopped_optimizers(mid):
                 optim = self.get_optimizer(mid, name)
                 for pid in self.filter_param_dict_for_optimizer(grads, optim):
                     del grads[pid]
-                # Adam skips a parameter whose .grad is None: no step and no moment update.
                 optim.zero_grad(set_to_none=True)
         zero_non_finite_(grads)  # RLlib's NaN/inf guard, one test for all (constrained/gradients.py)
-        super().apply_gradients(grads)
+        if self.config.update_path != "fused":
+            super().apply_gradients(grads)
+            return
+        for param, grad in grads.items():  # TorchLearner's own step: .grad ← the gradient (refs are params)
+            param.grad = grad
+        step_adams([optim for mid in self.module.keys() for _, optim in self.get_optimizers_for_module(mid)])
 
     @override(PPOTorchLearner)
     def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
@@ -236,3 +332,20 @@ def full_batch_kl(module, columns: dict) -> float:
     old = dist.from_logits(columns[Columns.ACTION_DIST_INPUTS])
     new = dist.from_logits(module.action_dist_inputs(columns[Columns.OBS]))
     return float(old.kl(new)[columns[Columns.LOSS_MASK]].mean())
+
+
+def critic_parameters(module) -> list:
+    """The parameters of both critics, V_R's encoder and head and V_C (the L2 term's)."""
+    return [p for net in (module.encoder.critic_encoder, module.vf, module.cost_vf) for p in net.parameters()]
+
+
+@torch.no_grad()
+def add_l2_gradient_(params: list, coeff: float) -> None:
+    """p.grad += coeff·2p for every p: the gradient of coeff·Σ p² as autograd computes it
+    (pow's backward 2·p, times the coefficient the product's backward passes down, one rounding;
+    then added to the loss's own gradient, an addition in either order)."""
+    params = [p for p in params if p.grad is not None]
+    if params:
+        twice = torch._foreach_mul(params, 2.0)
+        torch._foreach_mul_(twice, coeff)
+        torch._foreach_add_([p.grad for p in params], twice)

@@ -17,6 +17,7 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.sac_lag.config import SACLagConfig
 from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
+from lac_rllib.constrained.minibatch_loop import update_kwargs
 from lac_rllib.constrained.off_policy import OffPolicySafeAlgorithm
 
 
@@ -39,15 +40,16 @@ class SACLag(OffPolicySafeAlgorithm):
             if cfg.minibatch_draws == "with_replacement":
                 # The learner connector drew updates_per_iteration minibatches' rows (DrawRows):
                 # one pass over them, in order, is that many uniform draws from the buffer.
-                passes = {"num_minibatches": cfg.updates_per_iteration, "num_epochs": 1,
-                          "shuffle_batch_per_epoch": False}
+                plan = {"num_total_minibatches": cfg.updates_per_iteration, "num_epochs": 1, "shuffle": False}
             else:
                 # num_epochs > 1 with a reshuffle: RLlib's MiniBatchCyclicIterator then reshuffles the
                 # buffer every time the minibatches wrap around it (at one update per env step an
-                # iteration draws several times a small buffer's rows); num_minibatches sets the steps.
-                passes = {"num_minibatches": max(1, round(cfg.updates_per_env_step * new_steps)), "num_epochs": 2,
-                          "shuffle_batch_per_epoch": True}
-            self.update_from_replay(minibatch_size=cfg.batch_size, timesteps={TS_EPISODE_COSTS: list(costs)}, **passes)
+                # iteration draws several times a small buffer's rows); num_total_minibatches sets the steps.
+                plan = {"num_total_minibatches": max(1, round(cfg.updates_per_env_step * new_steps)),
+                        "num_epochs": 2, "shuffle": True}
+            passes = update_kwargs(cfg.update_path, minibatch_size=cfg.batch_size, **plan)
+            passes["timesteps"] = {TS_EPISODE_COSTS: list(costs), **passes["timesteps"]}
+            self.update_from_replay(**passes)
         self.log_top_level(returns, costs)
         if not updating:
             # No learner results yet, so log_top_level found no ν: report λ as the learner holds it

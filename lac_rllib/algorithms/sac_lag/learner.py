@@ -15,7 +15,10 @@ One ``learner_group.update`` call makes all the gradient steps of an iteration (
    call (the episodes arrive between calls), so N λ steps per call are OmniSafe's one per env step.
 
 Each critic network and the actor are clipped to a global gradient norm of ``max_grad_norm``
-(``postprocess_gradients_for_module``, one clip per optimizer, as OmniSafe clips per network).
+(``postprocess_gradients_for_module``, one clip per optimizer, as OmniSafe clips per network), and
+the targets averaged, through constrained/gradients.py (RLlib's clip and Polyak formulas, in
+foreach ops). With ``update_path="fused"`` the call's minibatches run inside one ``_update``
+(constrained/minibatch_loop.py): the same steps, bit for bit, without RLlib's per-minibatch work.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.gradients import zero_non_finite_
+from lac_rllib.constrained.gradients import clip_global_norms_, polyak_, zero_non_finite_
 from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier
 from lac_rllib.constrained.metrics import (
     ACTOR_LOSS,
@@ -44,6 +47,7 @@ from lac_rllib.constrained.metrics import (
     Q_REWARD_MEAN,
     TS_EPISODE_COSTS,
 )
+from lac_rllib.constrained.minibatch_loop import FusedMinibatchLoop
 
 REWARD_CRITIC, COST_CRITIC, ACTOR = "reward_critic", "cost_critic", "actor"  # optimizer names
 LAGRANGE_RULES = {"adam": AdamStep, "gradient": GradientStep}
@@ -78,7 +82,7 @@ def actor_loss(actor_out: dict, nu: torch.Tensor, alpha: float) -> torch.Tensor:
     return per_sample.mean() / (1.0 + nu)
 
 
-class SACLagTorchLearner(TorchLearner):
+class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
     @override(TorchLearner)
     def build(self) -> None:
         torch.set_num_threads(self.config.torch_threads)
@@ -150,7 +154,8 @@ class SACLagTorchLearner(TorchLearner):
         q_r, q_c = fwd_out[M.Q_REWARD], fwd_out[M.Q_COST]
         reward_loss = ((q_r - y_r) ** 2).mean(-1).sum()  # mse(Q_R1, y_R) + mse(Q_R2, y_R)
         cost_loss = ((q_c - y_c) ** 2).mean()
-        self._last[module_id] = {**self._last.get(module_id, {}), CRITIC_LOSS: reward_loss.detach() + cost_loss.detach(),
+        self._last[module_id] = {**self._last.get(module_id, {}),
+                                 CRITIC_LOSS: reward_loss.detach() + cost_loss.detach(),
                                  Q_REWARD_MEAN: q_r.detach().mean(), Q_COST_MEAN: q_c.detach().mean()}
         self._actor_obs[module_id] = batch[Columns.OBS]
         return reward_loss + cost_loss
@@ -161,9 +166,8 @@ class SACLagTorchLearner(TorchLearner):
         then clips each network's gradients to a global norm of ``max_grad_norm`` [O]."""
         grads = {ref: g for ref, g in module_gradients_dict.items() if g is not None}
         if config.max_grad_norm is not None:
-            for _, optimizer in self.get_optimizers_for_module(module_id):
-                clip_global_norm_(list(self.filter_param_dict_for_optimizer(grads, optimizer).values()),
-                                  config.max_grad_norm)
+            clip_global_norms_([list(self.filter_param_dict_for_optimizer(grads, optimizer).values())
+                                for _, optimizer in self.get_optimizers_for_module(module_id)], config.max_grad_norm)
         return grads
 
     @override(TorchLearner)
@@ -180,7 +184,7 @@ class SACLagTorchLearner(TorchLearner):
             obs = self._actor_obs.pop(mid, None)
             if actor_step and obs is not None:
                 self._actor_step(mid, module.unwrapped(), obs, config)
-                polyak(module.unwrapped().get_target_network_pairs(), config.polyak_tau)
+                polyak_(module.unwrapped().get_target_network_pairs(), config.polyak_tau)
             self.multipliers[mid].step(self._cost_this_call)  # None (warm-up, no episode yet): no step
         self.updates += 1
 
@@ -195,7 +199,7 @@ class SACLagTorchLearner(TorchLearner):
         pi_loss = actor_loss(module.forward_actor(obs), module.nu, config.alpha)
         grads = dict(zip((self.get_param_ref(p) for p in params), torch.autograd.grad(pi_loss, params)))
         if config.max_grad_norm is not None:
-            clip_global_norm_(list(grads.values()), config.max_grad_norm)
+            clip_global_norms_([list(grads.values())], config.max_grad_norm)
         zero_non_finite_(grads)
         super().apply_gradients(grads)
         self._last[module_id][ACTOR_LOSS] = pi_loss.detach()
@@ -223,22 +227,3 @@ class SACLagTorchLearner(TorchLearner):
             for mid, multiplier_state in own["lagrange"].items():
                 self.multipliers[mid].set_state(multiplier_state)
 
-
-@torch.no_grad()
-def clip_global_norm_(grads: list[torch.Tensor], max_norm: float) -> None:
-    """Scale ``grads`` in place so their joint L2 norm is at most ``max_norm``: torch's
-    clip_grad_norm_ (OmniSafe's clip) on gradient tensors, the scaling of RLlib's global-norm clip
-    without its per-tensor nan_to_num (TorchLearner's NaN guard follows in apply_gradients)."""
-    if grads:
-        total = torch.nn.utils.get_total_norm(grads)
-        coef = (max_norm / (total + 1e-6)).clamp(max=1.0)
-        for g in grads:
-            g.mul_(coef)
-
-
-@torch.no_grad()
-def polyak(pairs, tau: float) -> None:
-    """θ' ← θ' + τ·(θ − θ') = τ·θ + (1 − τ)·θ' for every (main, target) network pair, in place."""
-    for main_net, target_net in pairs:
-        for p, p_target in zip(main_net.parameters(), target_net.parameters()):
-            p_target.lerp_(p, tau)
