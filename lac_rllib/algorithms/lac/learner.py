@@ -19,14 +19,12 @@ from typing import Any
 import torch
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.torch.torch_learner import TorchLearner
-from ray.rllib.core.learner.utils import update_target_network
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.utils.annotations import override
-from ray.rllib.utils.torch_utils import clip_gradients  # what TorchLearner._get_clip_function returns
 
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.gradients import zero_non_finite_
+from lac_rllib.constrained.gradients import clip_global_norm_, polyak_, zero_non_finite_
 from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
 from lac_rllib.constrained.metrics import (
     ACTOR_KL,
@@ -178,7 +176,7 @@ class LACTorchLearner(TorchLearner):
         grads = dict(module_gradients_dict)
         if config.actor_grad_clip:  # [C] clips the actor only (norm 40)
             actor_grads = self.filter_param_dict_for_optimizer(grads, self.get_optimizer(module_id, ACTOR))
-            clip_gradients(actor_grads, grad_clip=config.actor_grad_clip, grad_clip_by="global_norm")
+            clip_global_norm_(list(actor_grads.values()), config.actor_grad_clip)  # RLlib's clip's arithmetic
             grads.update(actor_grads)
         return grads
 
@@ -206,9 +204,8 @@ class LACTorchLearner(TorchLearner):
             config = self.config.get_config_for_module(mid)
             if config.polyak_from_actor_start and self._iteration < config.actor_update_start_iteration:
                 continue  # [C]: the targets stay at their init until the actor trains
-            # Algorithm 2, lines 11-13: Polyak after every gradient step.
-            for main_net, target_net in module.unwrapped().get_target_network_pairs():
-                update_target_network(main_net=main_net, target_net=target_net, tau=config.polyak_tau)
+            # Algorithm 2, lines 11-13: Polyak after every gradient step (RLlib's formula and rounding).
+            polyak_(module.unwrapped().get_target_network_pairs(), config.polyak_tau)
 
     # ----- state: ν rides in the module; the iteration and each multiplier's rule and bound here -----
     @override(TorchLearner)
