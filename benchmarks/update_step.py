@@ -1,18 +1,22 @@
-"""One gradient step of each algorithm: RLlib's NaN/inf guard against ours, same run.
+"""One gradient step of each baseline, four ways, same run: RLlib's update path, the fused one (the
+default), a plain-torch step of the same networks, losses and optimizers, and that step's matmul
+floor.
 
-    python benchmarks/update_step.py [--task SafetyPointGoal1-v0] [--steps 300] [--repeats 3]
+    python benchmarks/update_step.py [--task SafetyPointGoal1-v0] [--algos ppo_lag,sac_lag] [--steps 300] [--repeats 3]
 
-The guard: RLlib's per-tensor tests (``torch_skip_nan_gradients=False``; ours still runs first,
-one cheap test more) against ours alone (lac_rllib/constrained/gradients.py), the same update bit
-for bit (tests/constrained/test_gradients.py). For each algorithm at the task's preset, two
-algorithms are built with the same seed, their data made the same way, and their updates timed
-interleaved:
-- lac, sac_lag: ms per gradient step of ``update_from_replay`` over ``--steps`` 256-row minibatches
-  of the replay buffer, after 2,000 env steps of random actions (LAC: a tenth of the steps, its
-  chain makes each ~0.3 s);
-- ppo_lag: ms per gradient step of one iteration's update (40 epochs of 64-row minibatches, the
-  KL early stop off so that both make every step), on 2,000 env steps per iteration.
-Prints the medians and the ratio; one torch thread, one CPU.
+For each algorithm at the task's preset, two algorithms are built from one seed, ``update_path=
+"rllib"`` (RLlib's minibatch iterator, its PPO loss, torch's per-tensor Adam, its clip: the update
+as it was before the fused path) and ``"fused"``, their data made the same way and their update
+calls timed interleaved, in ms per gradient step of a call:
+- ppo_lag: one iteration's update (``--steps`` ×10 env steps per iteration: 3,000 by default,
+  ~1,900 steps of 64-row minibatches at OmniSafe's 40 epochs; the KL early stop off, so that both
+  make every step);
+- sac_lag: one iteration's update of ``--steps`` 256-row steps (one per env step), after 2,000
+  random env steps.
+Beside them, :mod:`reference_steps`' plain-torch step on minibatches of the same shapes (its loss
+and gradients are the learner's: tests/benchmarks/test_update_step.py) and its time inside matrix
+products. Prints medians over ``--repeats`` and the ratios; one torch thread, one CPU. The two
+paths make the same update bit for bit (tests/algorithms/test_update_path.py).
 """
 
 from __future__ import annotations
@@ -21,33 +25,30 @@ import argparse
 import statistics
 import sys
 import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+PATHS = ("rllib", "fused")
+ALGOS = ("ppo_lag", "sac_lag")
 
 
-def _build(algo: str, task: str, defaults: bool):
-    """The algorithm as we configure it, or (``defaults``) with RLlib's per-tensor NaN tests."""
+def _build(algo: str, task: str, path: str, steps: int):
     from lac_rllib.algorithms.registry import build_config
 
-    sets = {"lac": {"random_iterations": 1, "env_steps_per_iteration": 2000},
-            "sac_lag": {"random_env_steps": 2000, "env_steps_per_iteration": 2000},
-            # No KL early stop: every epoch makes all its steps, whatever the data.
-            "ppo_lag": {"train_batch_size_per_learner": 2000, "target_kl": None}}[algo]
-    config = build_config(algo, task, 0, sets, timesteps=10**7)
-    config.torch_skip_nan_gradients = not defaults
-    return config.build_algo()
+    sets = {"ppo_lag": {"train_batch_size_per_learner": 10 * steps, "target_kl": None},
+            "sac_lag": {"random_env_steps": 2000, "env_steps_per_iteration": steps}}[algo]
+    return build_config(algo, task, 0, {**sets, "update_path": path}, timesteps=10**7).build_algo()
 
 
-def _timed_update(algo_name: str, algo, steps: int) -> float:
-    """Seconds per gradient step of one update call (its gradient steps counted: PPO-Lag's KL
-    early stop makes fewer than its epochs say)."""
+def _timed_update(algo) -> float:
+    """Seconds per gradient step of one training iteration's update call (its steps counted)."""
     learner = algo.learner_group._learner  # local learner (num_learners=0)
-    counted, apply = [0], learner.apply_gradients
+    counted, apply, update, seconds = [0], learner.apply_gradients, algo.learner_group.update, []
 
     def count(*args, **kwargs):
         counted[0] += 1
         return apply(*args, **kwargs)
-
-    learner.apply_gradients, seconds = count, []
-    update = algo.learner_group.update
 
     def timed(*args, **kwargs):
         t0 = time.perf_counter()
@@ -55,60 +56,83 @@ def _timed_update(algo_name: str, algo, steps: int) -> float:
         seconds.append(time.perf_counter() - t0)
         return out
 
-    algo.learner_group.update = timed
+    learner.apply_gradients, algo.learner_group.update = count, timed
     try:
-        if algo_name == "ppo_lag":
-            algo.train()
-        else:
-            algo.update_from_replay(minibatch_size=256, num_minibatches=steps, timesteps={})
+        algo.train()
     finally:
         learner.apply_gradients, algo.learner_group.update = apply, update
     return sum(seconds) / max(counted[0], 1)
 
 
+def _reference(name: str, algo, n: int):
+    """The plain-torch step of ``algo``'s networks and ``n`` minibatches for it."""
+    import reference_steps as R
+
+    learner = algo.learner_group._learner
+    module = learner.module["default_policy"].unwrapped()
+    step = (R.PPOLagStep if name == "ppo_lag" else R.SACLagStep)(module, learner.config)
+    size = learner.config.minibatch_size if name == "ppo_lag" else learner.config.batch_size
+    return step, [R.make_batch(name, module, size, seed=i) for i in range(n)]
+
+
+def _timed_reference(step, batches) -> float:
+    t0 = time.perf_counter()
+    for b in batches:
+        step.step(b)
+    return (time.perf_counter() - t0) / len(batches)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", default="SafetyPointGoal1-v0")
-    parser.add_argument("--algos", default="sac_lag,ppo_lag,lac")
+    parser.add_argument("--algos", default=",".join(ALGOS))
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
-    from lac_rllib.algorithms.registry import check_algo
     from lac_rllib.tasks import get_task
 
     try:  # bad input, before Ray starts
         get_task(args.task)
         for name in args.algos.split(","):
-            check_algo(name)
+            if name not in ALGOS:
+                raise ValueError(f"--algos {name!r}; accepted: {', '.join(ALGOS)} (LAC's step is its chain's: "
+                                 "benchmarks/langevin.py)")
         if args.steps < 10 or args.repeats < 1:
             raise ValueError(f"--steps {args.steps} / --repeats {args.repeats}; "
                              "accepted: --steps >= 10, --repeats >= 1")
     except ValueError as e:
         parser.exit(2, f"update_step: error: {e}\n")
     import ray
+    import reference_steps
     import torch
 
     torch.set_num_threads(1)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
-    lines = ["| algorithm | ms per step, RLlib's guard | ms per step, ours | ratio |",
-             "|---|---:|---:|---:|"]
+    lines = ["| algorithm | RLlib's path | fused | plain torch | matmul floor | RLlib / fused | fused / plain "
+             "| fused / floor |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name in args.algos.split(","):
-        algos = {defaults: _build(name, args.task, defaults) for defaults in (True, False)}
+        algos = {path: _build(name, args.task, path, args.steps) for path in PATHS}
         try:
-            if name != "ppo_lag":
-                for a in algos.values():
-                    a.train()  # fills the buffer (random actions)
-                    _timed_update(name, a, 10)  # warm-up: a compile (LAC's chain), first allocations
-            times = {defaults: [] for defaults in algos}
+            for a in algos.values():  # warm-up: SAC-Lag's random phase, first allocations
+                for _ in range(1 if name == "ppo_lag" else 2000 // args.steps + 1):
+                    a.train()
+            times = {path: [] for path in PATHS}
+            plain = []
+            step, batches = _reference(name, algos["fused"], min(args.steps, 300))
             for _ in range(args.repeats):
-                for defaults, a in algos.items():
-                    times[defaults].append(_timed_update(name, a, args.steps // 10 if name == "lac" else args.steps))
+                for path, a in algos.items():
+                    times[path].append(_timed_update(a))
+                plain.append(_timed_reference(step, batches))
+            floor = reference_steps.matmul_seconds(step.step, batches[:50])
         finally:
             for a in algos.values():
                 a.stop()
-        old, new = (1e3 * statistics.median(times[d]) for d in (True, False))
-        lines.append(f"| {name} | {old:.2f} | {new:.2f} | {old / new:.2f}x |")
+        rllib, fused, ref = (1e3 * statistics.median(t) for t in (times["rllib"], times["fused"], plain))
+        floor *= 1e3
+        lines.append(f"| {name} | {rllib:.2f} | {fused:.2f} | {ref:.2f} | {floor:.2f} | {rllib / fused:.2f}x "
+                     f"| {fused / ref:.2f}x | {fused / floor:.2f}x |")
         print(lines[-1], flush=True)
+    print("\nms per gradient step (medians of", args.repeats, "interleaved repeats), one CPU, one torch thread")
     print("\n".join(lines))
     return 0
 
