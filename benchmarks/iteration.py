@@ -39,6 +39,10 @@ seconds per ``--steps`` env steps (default 20k) of training after a warm-up of a
 random phase and the actor's delay off, SAC-Lag's random steps within the warm-up), and for the
 off-policy ones the share of RLlib's per-call overhead (one ``learner_group.update`` per iteration:
 the calls times the cost of an update call of one minibatch, measured in the same run).
+
+``--algos ppo_lag,sac_lag --update-paths`` times the baselines' whole training iterations on
+RLlib's update path and on the fused one (``update_path``: the same updates bit for bit), same
+run, one CPU, interleaved iteration by iteration after a warm-up, and prints the ratio.
 """
 
 from __future__ import annotations
@@ -283,6 +287,34 @@ def time_algorithm(algo: str, task: str, seed: int, steps: int, cpus: int = 1, t
     return {"seconds": seconds * steps / done, "calls": calls[0] * steps / done, "per_call_s": per_call}
 
 
+def time_update_paths(algo: str, task: str, seed: int, steps: int) -> dict[str, float]:
+    """Seconds per ``steps`` env steps of ``algo``'s training on each update path, the two built
+    from one seed and stepped iteration by iteration in turn (the machine's load falls on both)."""
+    from lac_rllib.algorithms.registry import build_config
+
+    sets = {"sac_lag": {"random_env_steps": steps // 2}}.get(algo, {})
+    algos = {path: build_config(algo, task, seed, {**sets, "update_path": path}, timesteps=10**9).build_algo()
+             for path in ("rllib", "fused")}
+    seconds = dict.fromkeys(algos, 0.0)
+    try:
+        def lifetime(a):
+            return a.metrics.peek(("env_runners", "num_env_steps_sampled_lifetime"), default=0)
+
+        for a in algos.values():  # warm-up (SAC-Lag: its random steps)
+            while lifetime(a) < steps:
+                a.train()
+        start = {p: lifetime(a) for p, a in algos.items()}
+        while min(lifetime(a) - start[p] for p, a in algos.items()) < steps:
+            for p, a in algos.items():
+                t0 = time.perf_counter()
+                a.train()
+                seconds[p] += time.perf_counter() - t0
+        return {p: seconds[p] * steps / (lifetime(a) - start[p]) for p, a in algos.items()}
+    finally:
+        for a in algos.values():
+            a.stop()
+
+
 def table(task: str, results: dict[str, dict[str, float]]) -> str:
     names = list(results)
     lines = [f"### {task}", "", "| phase | " + " | ".join(f"{n} (s)" for n in names) + " | baseline / current |",
@@ -312,6 +344,8 @@ def main(argv=None) -> int:
     parser.add_argument("--algos", default=None, metavar="A,B,...",
                         help="instead of the phases: seconds per --steps env steps of each algorithm, one CPU")
     parser.add_argument("--steps", type=int, default=20_000, help="env steps timed per algorithm (--algos)")
+    parser.add_argument("--update-paths", action="store_true",
+                        help="with --algos: the baselines' iterations on update_path rllib against fused")
     parser.add_argument("--cpus", type=int, default=None, metavar="N",
                         help="instead of the phases: whole iterations on 1 CPU against N CPUs, and their ratio")
     args = parser.parse_args(argv)
@@ -327,6 +361,13 @@ def main(argv=None) -> int:
         for text in args.variant:
             name, _, pairs = text.partition(":")
             variants[name] = parse_sets([p for p in pairs.split(",") if p])
+        if args.update_paths:
+            from lac_rllib.algorithms.registry import algo_config
+
+            for a in (args.algos or "").split(","):
+                if "update_path" not in algo_config(a).FIELDS.names:
+                    raise ValueError(f"--update-paths with --algos {a!r}: it has no update_path; accepted: "
+                                     "the baselines that have (ppo_lag, sac_lag)")
     except ValueError as e:
         parser.exit(2, f"iteration: error: {e}\n")
 
@@ -340,6 +381,20 @@ def main(argv=None) -> int:
     what = f"on 1 and {args.cpus} CPUs" if args.cpus else "one CPU"
     out = [f"One LAC iteration per configuration, {what}. {runtime_versions()}, "
            f"torch {torch.__version__}, CPU capability {torch.backends.cpu.get_cpu_capability()}.", ""]
+    if args.algos and args.update_paths:
+        for task in args.tasks:
+            lines = [f"### {task}", "", f"| algorithm | s per {args.steps:,} env steps, update_path rllib | fused | "
+                     "ratio |", "|---|---:|---:|---:|"]
+            for a in args.algos.split(","):
+                t = time_update_paths(a, task, args.seed, args.steps)
+                lines.append(f"| {a} | {t['rllib']:.1f} | {t['fused']:.1f} | {t['rllib'] / t['fused']:.2f}x |")
+                print(lines[-1], flush=True)
+            out += [*lines, ""]
+        print("\n".join(out))
+        if args.out:
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.out).write_text("\n".join(out))
+        return 0
     if args.algos and args.cpus:
         for task in args.tasks:
             lines = [f"### {task}", "", f"| algorithm | s per {args.steps:,} env steps, 1 CPU | {args.cpus} CPUs | "
