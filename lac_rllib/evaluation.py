@@ -21,11 +21,13 @@ this process, without ``ray.init``:
 ``evaluate(policy, episodes, seed, actions=...)`` runs ``episodes`` episodes, episode ``i``
 reset with seed ``seed + i``, fully deterministic for equal seeds:
 
-* ``actions="generator"``: the actor's mean μ_φ(s) (what RLlib's inference acts with);
-* ``actions="langevin"``: Algorithm 1 (docs/spec.md §1) at each visited state, started from the TARGET
-  actor π_φ'(·|s), with the online critics and the checkpoint's ν, noise from a
-  ``torch.Generator`` seeded with ``seed + i``; it also reports the mean energy of the chain's
-  start ã₀ ~ π_φ' (the generator's proposal) against the refined action ã_T.
+* ``actions="generator"`` (every algorithm): the policy's deterministic action
+  (``module.deterministic_action``: the mean, as the env receives it);
+* another mode its algorithm declares (``ACTIONS``; LAC's ``"langevin"``: Algorithm 1 at each
+  visited state) is the module's own ``evaluation_action(obs, mode, generator=..., **options)``,
+  with noise from a ``torch.Generator`` seeded with ``seed + i`` and the mode's per-state
+  diagnostics averaged into the result (``<name>_mean``), beside what the module's
+  ``evaluation_info(mode, **options)`` says it ran with. The evaluator knows no algorithm's mode.
 
 Actions are clipped to the action bounds before ``env.step`` (as RLlib's ``clip_actions``
 does in training). The episode cost follows the task's convention (sum, or discounted with
@@ -53,7 +55,8 @@ from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 #: older formats it still reads, each with the keys renamed since (old name → current name).
 SUPPORTED_CHECKPOINT_FORMAT = CHECKPOINT_FORMAT
 OLDER_FORMATS = {2: {"lac_config": "algo_config"}}
-ACTION_MODES = ("generator", "langevin")
+#: The mode every algorithm acts with (the others are their modules' own).
+GENERATOR = "generator"
 #: The RLlib algorithm checkpoint's metadata file (``Algorithm.METADATA_FILE_NAME``).
 ALGO_METADATA_FILE = "rllib_checkpoint.json"
 #: Frames rendered per episode video at most (longer episodes are subsampled).
@@ -414,16 +417,18 @@ def _stats(values: list[float]) -> tuple[float, float]:
     return float(arr.mean()), float(arr.std())
 
 
-def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator",
+def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
              langevin_steps: int | None = None, langevin_step_size: float | None = None,
              video_dir: str | None = None, progress: bool = True) -> dict:
     """Run ``episodes`` episodes (episode i reset with ``seed + i``) and summarise them.
 
     Returns per-episode ``returns``/``costs``/``lengths``, ``return_mean``/``return_std``,
     ``cost_mean``/``cost_std`` (std over episodes, ddof 0), ``cost_limit``,
-    ``within_limit_fraction`` (episodes with cost ≤ b), and for ``actions="langevin"``
-    ``energy_generator_mean`` (E at the chain start ã₀ ~ π_φ'), ``energy_refined_mean``
-    (E at ã_T) and ``action_displacement_mean`` over all visited states.
+    ``within_limit_fraction`` (episodes with cost ≤ b), and for a mode of the module's own its
+    diagnostics' means over all visited states and ``evaluation_info`` (LAC's ``"langevin"``:
+    ``energy_generator_mean`` (E at the chain start ã₀ ~ π_φ'), ``energy_refined_mean`` (E at
+    ã_T), ``action_displacement_mean``; T, η and ν). ``langevin_steps``/``langevin_step_size``
+    are lac-eval's options of that mode (``steps``/``step_size`` of LAC's ``evaluation_action``).
     """
     from ray.rllib.core.columns import Columns
     from ray.rllib.env.single_agent_episode import SingleAgentEpisode
@@ -431,20 +436,18 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
     from lac_rllib.constrained.costs import step_cost
     from lac_rllib.tasks import get_task
 
-    if actions not in ACTION_MODES:
-        raise ValueError(f"actions={actions!r} is invalid; accepted: {' | '.join(ACTION_MODES)}")
-    if actions not in policy.actions:  # the chain needs LAC's critics and ν
-        raise ValueError(f"actions={actions!r} is LAC's; this checkpoint is {policy.algo}'s; accepted: "
-                         f"{' | '.join(policy.actions)}")
+    if actions not in policy.actions:
+        raise ValueError(f"actions={actions!r} is not a mode of this checkpoint's algorithm ({policy.algo}); "
+                         f"accepted: {' | '.join(policy.actions)}")
     if not (isinstance(episodes, int) and episodes >= 1):
         raise ValueError(f"episodes={episodes!r} is invalid; accepted: an integer >= 1")
     if langevin_steps is not None and not (isinstance(langevin_steps, int) and langevin_steps >= 1):
         raise ValueError(f"langevin_steps={langevin_steps!r} is invalid; accepted: an integer >= 1")
     if langevin_step_size is not None and not (math.isfinite(langevin_step_size) and langevin_step_size > 0):
         raise ValueError(f"langevin_step_size={langevin_step_size!r} is invalid; accepted: a number > 0")
-    if actions == "langevin":
-        steps = langevin_steps or int(policy.algo_config["langevin_steps"])
-        step_size = langevin_step_size or float(policy.algo_config["langevin_step_size"])
+    options = {k: v for k, v in (("steps", langevin_steps), ("step_size", langevin_step_size)) if v is not None}
+    if options and actions == GENERATOR:
+        raise ValueError("langevin_steps/langevin_step_size are options of a chain mode, not of actions='generator'")
 
     module, gamma_c = policy.module, policy.episode_cost_discount
     low, high = policy.action_low, policy.action_high
@@ -460,12 +463,12 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
     fps = float((env.metadata or {}).get("render_fps") or 30)
 
     returns, costs, lengths = [], [], []
-    e_start, e_end, displacement = [], [], []
+    diagnostics: dict[str, list[float]] = {}
     bar = _Progress(episodes, f"eval {actions}", progress)
     try:
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
-            generator = torch.Generator().manual_seed(seed + i) if actions == "langevin" else None
+            generator = torch.Generator().manual_seed(seed + i)  # a mode's noise (unused by "generator")
             episode = SingleAgentEpisode(observations=[obs], infos=[info],
                                          observation_space=policy.env_to_module.input_observation_space,
                                          action_space=policy.env_to_module.input_action_space)
@@ -478,16 +481,12 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
                                              shared_data={})
                 s = batch[Columns.OBS]
                 with torch.no_grad():
-                    if actions == "generator":
+                    if actions == GENERATOR:
                         action = module.deterministic_action(s)
-                    else:
-                        t_mean, t_log_std = module.target_actor(s)
-                        chain = module.langevin(s, t_mean, t_log_std, steps=steps,
-                                                step_size=step_size, generator=generator)
-                        action = chain.action
-                        e_start.append(float(chain.energy_start[0]))
-                        e_end.append(float(chain.energy_end[0]))
-                        displacement.append(float(chain.displacement[0]))
+                    else:  # the module's own mode (ACTIONS)
+                        action, diag = module.evaluation_action(s, actions, generator=generator, **options)
+                        for name, value in diag.items():
+                            diagnostics.setdefault(name, []).append(value)
                 action = np.clip(action[0].numpy().astype(np.float32), low, high)
                 obs, reward, terminated, truncated, info = env.step(action)
                 ret += float(reward)
@@ -520,12 +519,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = "generator
         "within_limit_fraction": float(np.mean([c <= limit for c in costs])),
         "videos": videos, "video_notice": video_notice,
     }
-    if actions == "langevin":
-        result.update({
-            "langevin_steps": steps, "langevin_step_size": step_size,
-            "nu": float(module.nu),
-            "energy_generator_mean": float(np.mean(e_start)),
-            "energy_refined_mean": float(np.mean(e_end)),
-            "action_displacement_mean": float(np.mean(displacement)),
-        })
+    if actions != GENERATOR:
+        result.update(module.evaluation_info(actions, **options))
+        result.update({f"{name}_mean": float(np.mean(values)) for name, values in diagnostics.items()})
     return result

@@ -68,6 +68,29 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         """The generator's mean μ_φ(s): what inference acts with (``lac-eval --actions generator``)."""
         return self.actor(obs)[0]
 
+    # ----- evaluation (lac-eval --actions) -----
+    def evaluation_action(self, obs: torch.Tensor, mode: str, *, generator=None, steps=None,
+                          step_size=None) -> tuple[torch.Tensor, dict[str, float]]:
+        """The action ``lac-eval --actions MODE`` takes at ``obs`` (1, obs_dim) and the mode's
+        per-state diagnostics: "generator", μ_φ(s); "langevin", Algorithm 1 started from the
+        TARGET actor π_φ'(·|s) with the online critics and ν, noise from ``generator``, T and η
+        the checkpoint's unless given, with the energy at the chain's start and end and the
+        distance it moved the action (docs/spec.md §1)."""
+        if mode == "generator":
+            return self.deterministic_action(obs), {}
+        t_mean, t_log_std = self.target_actor(obs)
+        chain = self.langevin(obs, t_mean, t_log_std, steps=steps, step_size=step_size, generator=generator)
+        return chain.action, {"energy_generator": float(chain.energy_start[0]),
+                              "energy_refined": float(chain.energy_end[0]),
+                              "action_displacement": float(chain.displacement[0])}
+
+    def evaluation_info(self, mode: str, *, steps=None, step_size=None) -> dict:
+        """What an evaluation in ``mode`` ran with, for its result: the chain's T, η and ν."""
+        if mode == "generator":
+            return {}
+        return {"langevin_steps": steps or self.chain_settings.steps,
+                "langevin_step_size": step_size or self.chain_settings.step_size, "nu": float(self.nu)}
+
     # ----- training (learner) -----
     @override(TorchRLModule)
     def _forward_train(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
