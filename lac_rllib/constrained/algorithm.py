@@ -44,11 +44,18 @@ def resume_seed(seed: int, iteration: int) -> int:
 
 
 class SafeAlgorithm(Algorithm):
-    """Base of the constrained algorithms; a subclass names itself in ``ALGO`` and implements
-    ``training_step``, calling :meth:`log_top_level` at its end."""
+    """Base of the constrained algorithms; a subclass names itself in ``ALGO`` and its config class
+    in ``CONFIG_CLASS``, and implements ``training_step``, calling :meth:`log_top_level` at its end."""
 
     #: The algorithm's name in checkpoints and runs.
     ALGO = ""
+    #: Its config class (a SafeTaskConfig), which RLlib's ``get_default_config`` builds for it.
+    CONFIG_CLASS: type | None = None
+
+    @classmethod
+    @override(Algorithm)
+    def get_default_config(cls):
+        return cls.CONFIG_CLASS(cls)
 
     @override(Algorithm)
     def setup(self, config) -> None:

@@ -1,8 +1,11 @@
-"""The safe-task part of every constrained algorithm's config: which task, its cost convention and
-limit, the observation filter, the episode-cost callback (docs/spec.md §5-6).
+"""SafeTaskConfig: what every constrained algorithm's config shares beside RLlib's
+``AlgorithmConfig``: its own fields as config attributes, each checked as it is set; the task, its
+cost convention and limit, the observation filter and the episode-cost callback (docs/spec.md
+§5-6); the classes RLlib builds; and a run's validated config (every algorithm's ``build_config``).
 
 An algorithm's params dataclass extends :class:`SafeTaskParams`; its config class mixes
-:class:`SafeTaskConfig` in before RLlib's ``AlgorithmConfig`` and declares its ``PRESETS``.
+:class:`SafeTaskConfig` in before RLlib's ``AlgorithmConfig`` and declares its fields, presets and
+classes, keeping in its own ``__init__`` and hooks only what is its own.
 """
 
 from __future__ import annotations
@@ -11,10 +14,14 @@ import dataclasses
 import functools
 from typing import Any
 
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.utils.annotations import override
+from ray.rllib.utils.serialization import deserialize_type
 from ray.tune.registry import register_env
 
 from lac_rllib.constrained.costs import EpisodeCostCallback
-from lac_rllib.constrained.cpus import OneThreadPerEnvRunner
+from lac_rllib.constrained.cpus import OneThreadPerEnvRunner, set_runners
 from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, or_none, param
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
@@ -50,12 +57,21 @@ def register_task_env(spec) -> None:
     register_env(spec.id, functools.partial(make_task_env, spec=spec))
 
 
-class SafeTaskConfig:
-    """Mixed into an ``AlgorithmConfig`` subclass (before it): ``.task(id)``, the derived cost
-    limit and discount, the observation filter and the episode-cost callback.
+#: An algorithm with a field of this name gets the run's budget in env steps there (``build``'s
+#: ``timesteps``); without one, the budget changes nothing in its config.
+BUDGET_FIELD = "total_env_steps"
+#: An algorithm with a field of this name records there the preset applied, and takes
+#: ``training(preset=NAME)`` and a ``preset`` in ``build``'s ``sets``.
+PRESET_FIELD = "preset"
 
-    The subclass declares ``PRESETS`` (preset name → field values; a task names its preset) and
-    sets its params' defaults in ``__init__``."""
+
+class SafeTaskConfig:
+    """Mixed into an ``AlgorithmConfig`` subclass (before it): the algorithm's fields (``PARAMS``)
+    as config attributes, ``.task(id)``, the derived cost limit and discount, the observation
+    filter, the episode-cost callback and RLlib's hooks naming the algorithm's classes.
+
+    The subclass declares ``PARAMS``, ``FIELDS``, ``PRESETS`` (preset name → field values; a task
+    names its preset) and its three classes, and sets RLlib's own settings in ``__init__``."""
 
     #: Preset name → the field values it sets (docs/spec.md §5).
     PRESETS: dict[str, dict[str, Any]] = {}
@@ -67,9 +83,13 @@ class SafeTaskConfig:
     TASK_FAMILY_OVERRIDES: dict[str, dict[str, Any]] = {}
     #: The learner's values an iteration's row reports (lac_rllib/constrained/metrics.py names them).
     REPORTED_KEYS: tuple[str, ...] = ()
+    #: The classes RLlib builds from this config, as class paths (RLlib's own form of a class in a
+    #: config), imported when first asked for: the algorithm's module imports its config, and the
+    #: config's module stays as light as the CLI and every env runner that unpickles it need.
+    ALGORITHM_CLASS = RL_MODULE_CLASS = LEARNER_CLASS = ""
 
     def __init__(self, algo_class=None):
-        super().__init__(algo_class=algo_class)
+        super().__init__(algo_class=algo_class or deserialize_type(self.ALGORITHM_CLASS, error=True))
         self.task_id: str | None = None
         self._task_spec = None  # the TaskSpec itself: copies of the config (env runners) carry it
         self.num_env_runners = 0  # sample in the driver unless asked
@@ -82,6 +102,25 @@ class SafeTaskConfig:
         # RLlib's per-tensor NaN/inf tests off: our learners make the same guard in one test per
         # gradient step (constrained/gradients.py: 9% of a SAC-Lag step was those tests).
         self.torch_skip_nan_gradients = True
+        for f in dataclasses.fields(self.PARAMS):
+            setattr(self, f.name, f.default)
+
+    @classmethod
+    def build(cls, task: str, seed: int, sets: dict, num_env_runners: int = 0, timesteps: int | None = None,
+              cpus: int = 1):
+        """The config of a run of ``timesteps`` env steps on ``task`` (validated; no Ray needed): the
+        task's preset (or ``sets["preset"]``, where the algorithm has that field), then ``sets``. The
+        budget goes to the ``total_env_steps`` field unless ``sets`` names it (the horizon of a
+        learning-rate decay that names no other); ``cpus`` > 1 runs the same algorithm on that many
+        CPUs (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
+        sets = dict(sets)
+        if timesteps is not None and BUDGET_FIELD in cls.FIELDS.names:
+            sets = {BUDGET_FIELD: int(timesteps), **sets}
+        preset = sets.pop(PRESET_FIELD, None) if PRESET_FIELD in cls.FIELDS.names else None
+        config = cls().task(task, preset=preset).training(**sets).debugging(seed=seed)
+        set_runners(config, num_env_runners, cpus)
+        config.validate()
+        return config
 
     def task(self, task_id: str, *, preset: str | None = None):
         """Train on a registered safe task: its preset (or ``preset``), then this algorithm's
@@ -89,13 +128,49 @@ class SafeTaskConfig:
         afterwards win over both."""
         spec = get_task(task_id)  # unknown id -> ValueError listing the known ones
         name = preset or spec.preset
-        if name not in self.PRESETS:
-            raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(self.PRESETS)}")
+        values = self.preset_values(name)
         self.task_id, self._task_spec = task_id, spec
-        self.training(**{**self.PRESETS[name], **self.TASK_FAMILY_OVERRIDES.get(spec.family, {})})
+        self.training(**{**values, **self.TASK_FAMILY_OVERRIDES.get(spec.family, {})})
         register_task_env(spec)
         self.environment(env=task_id)
+        if PRESET_FIELD in self.FIELDS.names:
+            setattr(self, PRESET_FIELD, name)
         return self
+
+    def preset_values(self, name: str) -> dict[str, Any]:
+        """The field values of the preset ``name`` (an unknown one raises a ValueError listing them)."""
+        if name not in self.PRESETS:
+            raise ValueError(f"unknown preset {name!r}; accepted: {', '.join(self.PRESETS)}")
+        return self.PRESETS[name]
+
+    @override(AlgorithmConfig)
+    def training(self, **kwargs):
+        """RLlib's settings and the algorithm's fields, each field checked as it is set (a list for a
+        field declared as a tuple, as YAML and JSON write one, kept as a tuple). ``preset=NAME``,
+        where the algorithm has that field, applies the preset first (the other values of the same
+        call win; None leaves the values as they are)."""
+        preset = kwargs.pop(PRESET_FIELD, None) if PRESET_FIELD in self.FIELDS.names else None
+        if preset is not None and preset is not NotProvided:
+            kwargs = {**self.preset_values(preset), **kwargs}
+            setattr(self, PRESET_FIELD, preset)
+        own = {k: kwargs.pop(k) for k in list(kwargs) if k in self.FIELDS.names}
+        super().training(**kwargs)
+        for name, value in own.items():
+            if value is NotProvided:
+                continue
+            if isinstance(value, list) and isinstance(self.FIELDS.defaults[name], tuple):
+                value = tuple(value)
+            self.FIELDS.check(name, value)
+            setattr(self, name, value)
+        return self
+
+    @override(AlgorithmConfig)
+    def validate(self) -> None:
+        """RLlib's checks, then every field's, then that a cost limit is set (the task's or cost_limit)."""
+        super().validate()
+        for name, value in self.params().items():
+            self.FIELDS.check(name, value)
+        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
 
     def params(self) -> dict[str, Any]:
         """The algorithm's own fields (``PARAMS``) as a plain dict: run metadata, config.json, MLflow params."""
@@ -137,3 +212,11 @@ class SafeTaskConfig:
             # the env runners' state, hence of every checkpoint.
             pipeline.prepend(FlooredMeanStdFilter(clip_by_value=self.obs_clip, std_floor=self.obs_std_floor))
         return pipeline
+
+    @override(AlgorithmConfig)
+    def get_default_rl_module_spec(self) -> RLModuleSpec:
+        return RLModuleSpec(module_class=deserialize_type(self.RL_MODULE_CLASS, error=True))
+
+    @override(AlgorithmConfig)
+    def get_default_learner_class(self):
+        return deserialize_type(self.LEARNER_CLASS, error=True)

@@ -20,12 +20,7 @@ from lac_rllib.constrained.off_policy import OffPolicySafeAlgorithm
 
 
 class LAC(OffPolicySafeAlgorithm):
-    ALGO = "lac"
-
-    @classmethod
-    @override(OffPolicySafeAlgorithm)
-    def get_default_config(cls) -> LACConfig:
-        return LACConfig(cls)
+    ALGO, CONFIG_CLASS = "lac", LACConfig
 
     @override(OffPolicySafeAlgorithm)
     def training_step(self) -> None:

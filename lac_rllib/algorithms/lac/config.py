@@ -13,20 +13,13 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
-from ray.rllib.connectors.common.batch_individual_items import BatchIndividualItems
-from ray.rllib.connectors.learner import (
-    AddNextObservationsFromEpisodesToTrainBatch,
-    AddObservationsFromEpisodesToBatch,
-)
-from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.energy import DTYPE_CHOICES as LANGEVIN_DTYPES
 from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.constrained import fields, metrics
-from lac_rllib.constrained.costs import AddCostsFromInfos, ShuffleRows
 from lac_rllib.constrained.cpus import check_cpus, run_resources, runner_cpus, set_runners, use_cpus  # noqa: F401
 from lac_rllib.constrained.fields import (
     BOOL,
@@ -42,7 +35,8 @@ from lac_rllib.constrained.fields import (
     param,
 )
 from lac_rllib.constrained.networks import ACTIVATIONS
-from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
+from lac_rllib.constrained.off_policy_config import OffPolicyConfig
+from lac_rllib.constrained.task_config import SafeTaskParams
 
 CHAIN_AT = ("next", "current")
 LR_SCHEDULES = ("linear", "constant")
@@ -209,53 +203,43 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-class LACConfig(SafeTaskConfig, AlgorithmConfig):
+#: LAC's fields and what each accepts (the interface every algorithm's config module has:
+#: lac_rllib/algorithms/registry.py).
+FIELDS = fields.FieldSet(LACParams, "LAC")
+FIELD_RANGES, FIELD_NAMES = FIELDS.ranges, FIELDS.names
+field_docs, check_field, parse_sets = FIELDS.docs, FIELDS.check, FIELDS.parse_sets
+
+
+class LACConfig(OffPolicyConfig, AlgorithmConfig):
     """Config for :class:`lac_rllib.algorithms.lac.algorithm.LAC`. See :class:`LACParams` for the fields.
 
     ``LACConfig().task("SafetyPointGoal1-v0")`` sets the env, its cost convention and the
     task's preset (docs/spec.md §5, Tables 4-5); explicit ``training(...)`` values win over presets.
     """
 
-    PRESETS = PRESETS
+    PARAMS, FIELDS, PRESETS = LACParams, FIELDS, PRESETS
     #: Table 5 sets T = 50 Langevin steps on the Button1 tasks; we apply it to the whole Button
     #: family (levels 0-2, TaskSpec.family), whose goal (press the one right button) is the same.
     TASK_FAMILY_OVERRIDES = {"Button": {"langevin_steps": 50}}
     REPORTED_KEYS = (metrics.CRITIC_LOSS, metrics.ACTOR_LOSS, metrics.ACTOR_NLL, metrics.ACTOR_KL,
                      metrics.Q_REWARD_MEAN, metrics.Q_COST_MEAN, metrics.TARGET_REWARD_MEAN,
                      metrics.TARGET_COST_MEAN, metrics.NU_MAX, *metrics.CHAIN_HEALTH_KEYS)
+    ALGORITHM_CLASS = "lac_rllib.algorithms.lac.algorithm.LAC"
+    RL_MODULE_CLASS = "lac_rllib.algorithms.lac.module.LACTorchRLModule"
+    LEARNER_CLASS = "lac_rllib.algorithms.lac.learner.LACTorchLearner"
+    MINIBATCH_FIELD = "lac_minibatch_size"
 
     def __init__(self, algo_class=None):
-        from lac_rllib.algorithms.lac.algorithm import LAC
-
-        super().__init__(algo_class=algo_class or LAC)
-        for f in dataclasses.fields(LACParams):
-            setattr(self, f.name, f.default)
+        super().__init__(algo_class=algo_class)
         # RLlib fields with LAC's values.
         self.gamma = 0.99  # [P]
-        self.train_batch_size_per_learner = self.lac_minibatch_size
         self.clip_actions = True  # the env clips; the actor is unsquashed [C]
         self.normalize_actions = False
-        self.rollout_fragment_length = "auto"
 
     def resolved(self) -> dict[str, Any]:
         """``langevin_dtype`` as the chain runs it here: "auto" is bfloat16 on a CPU with native bf16
         matmuls, else float32 (lac_rllib.algorithms.lac.energy.resolve_dtype)."""
         return {"langevin_dtype": resolve_dtype(self.langevin_dtype)}
-
-    @override(AlgorithmConfig)
-    def training(self, **kwargs) -> "LACConfig":
-        own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELD_NAMES}
-        super().training(**kwargs)
-        for name, value in own.items():
-            if value is NotProvided:
-                continue
-            if name in ("actor_hidden", "critic_hidden") and isinstance(value, list):
-                value = tuple(value)
-            check_field(name, value)
-            setattr(self, name, value)
-        if "lac_minibatch_size" in own:
-            self.train_batch_size_per_learner = self.lac_minibatch_size
-        return self
 
     def lac_params(self) -> dict[str, Any]:
         """The LAC fields as a plain dict (for run metadata and the RLModule): ``params()``."""
@@ -265,9 +249,6 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
     @override(AlgorithmConfig)
     def validate(self) -> None:
         super().validate()
-        for name, value in self.lac_params().items():
-            check_field(name, value)
-        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
         if self.lr_schedule == "linear" and self.lr_decay_horizon is None and self.total_env_steps is None:
             raise ValueError(
                 "LAC config field total_env_steps=None is invalid with lr_schedule='linear' and no "
@@ -286,40 +267,6 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         """The env steps the linear decay runs over: lr_decay_horizon, else the run's budget."""
         return int(self.lr_decay_horizon if self.lr_decay_horizon is not None else self.total_env_steps)
 
-    @override(AlgorithmConfig)
-    def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
-        # "auto" splits env_steps_per_iteration (not the minibatch size) over the runners.
-        if self.rollout_fragment_length != "auto":
-            return self.rollout_fragment_length
-        n = self.num_envs_per_env_runner * (self.num_env_runners or 1)
-        base, extra = divmod(self.env_steps_per_iteration, n)
-        idx = max(worker_index - 1, 0)
-        return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
-
-    @override(AlgorithmConfig)
-    def build_learner_connector(self, input_observation_space, input_action_space, device=None):
-        """RLlib's learner pipeline plus s' for the critic targets, then the cost of each row
-        (docs/dependencies.md, "The cost column": this order), and a shuffle of the rows (one pass
-        over the buffer per iteration, docs/spec.md §5). RLlib's SAC adds s' the same way."""
-        pipeline = super().build_learner_connector(
-            input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
-        pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch())
-        pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
-        pipeline.insert_after(BatchIndividualItems, ShuffleRows(seed=self.seed))
-        return pipeline
-
-    @override(AlgorithmConfig)
-    def get_default_rl_module_spec(self) -> RLModuleSpec:
-        from lac_rllib.algorithms.lac.module import LACTorchRLModule
-
-        return RLModuleSpec(module_class=LACTorchRLModule)
-
-    @override(AlgorithmConfig)
-    def get_default_learner_class(self):
-        from lac_rllib.algorithms.lac.learner import LACTorchLearner
-
-        return LACTorchLearner
-
     @property
     @override(AlgorithmConfig)
     def _model_config_auto_includes(self) -> dict[str, Any]:
@@ -327,12 +274,6 @@ class LACConfig(SafeTaskConfig, AlgorithmConfig):
         return {**super()._model_config_auto_includes, **self.lac_params()}
 
 
-#: LAC's fields and what each accepts (the interface every algorithm's config module has:
-#: lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(LACParams, "LAC")
-FIELD_RANGES, FIELD_NAMES = FIELDS.ranges, FIELDS.names
-field_docs, check_field, parse_sets = FIELDS.docs, FIELDS.check, FIELDS.parse_sets
-LACConfig.PARAMS, LACConfig.FIELDS = LACParams, FIELDS
 CONFIG_CLASS, PARAMS = LACConfig, LACParams
 #: What ``lac-eval --actions`` accepts for a LAC policy: the generator's mean, or Algorithm 1's chain.
 ACTIONS = ("generator", "langevin")
@@ -371,14 +312,8 @@ def plan_update_s(params: dict, preset: str) -> float:
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> LACConfig:
-    """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed).
-
-    The budget is the horizon of the learning-rate decay unless ``sets`` or the preset names another.
-    ``cpus`` > 1 runs the same algorithm on that many CPUs (:func:`use_cpus`).
-    """
-    if timesteps is not None:
-        sets = {"total_env_steps": int(timesteps), **sets}
-    config = LACConfig().task(task).training(**sets).debugging(seed=seed)
-    set_runners(config, num_env_runners, cpus)
-    config.validate()
-    return config
+    """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed:
+    :meth:`~lac_rllib.constrained.task_config.SafeTaskConfig.build`). The budget is the horizon of
+    the learning-rate decay unless ``sets`` or the preset names another. ``cpus`` > 1 runs the same
+    algorithm on that many CPUs (:func:`use_cpus`)."""
+    return LACConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

@@ -43,12 +43,7 @@ from lac_rllib.constrained.minibatch_loop import update_kwargs
 
 
 class PPOLag(SafeAlgorithm, PPO):
-    ALGO = "ppo_lag"
-
-    @classmethod
-    @override(PPO)
-    def get_default_config(cls) -> PPOLagConfig:
-        return PPOLagConfig(cls)
+    ALGO, CONFIG_CLASS = "ppo_lag", PPOLagConfig
 
     @override(PPO)
     def training_step(self) -> None:

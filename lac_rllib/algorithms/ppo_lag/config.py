@@ -19,10 +19,9 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
 from ray.rllib.algorithms.ppo.ppo import PPOConfig
 from ray.rllib.connectors.learner import AddColumnsFromEpisodesToTrainBatch
-from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.constrained import fields, metrics
@@ -179,22 +178,26 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+#: PPO-Lag's fields and what each accepts (lac_rllib/algorithms/registry.py).
+FIELDS = fields.FieldSet(PPOLagParams, "PPO-Lag")
+
+
 class PPOLagConfig(SafeTaskConfig, PPOConfig):
     """Config for :class:`lac_rllib.algorithms.ppo_lag.algorithm.PPOLag`; fields: :class:`PPOLagParams`.
 
     ``PPOLagConfig().task(id)`` applies the task's preset; ``.task(id, preset="ssa")`` (or
-    ``training(preset="ssa")``) the paper's PPO-L. Explicit ``training(...)`` values win over presets.
+    ``training(preset="ssa")``, which applies its values first: the other values of the same call
+    win) the paper's PPO-L. Explicit ``training(...)`` values win over presets.
     """
 
-    PRESETS = PRESETS
+    PARAMS, FIELDS, PRESETS = PPOLagParams, FIELDS, PRESETS
     REPORTED_KEYS = metrics.PPO_LAG_KEYS
+    ALGORITHM_CLASS = "lac_rllib.algorithms.ppo_lag.algorithm.PPOLag"
+    RL_MODULE_CLASS = "lac_rllib.algorithms.ppo_lag.module.PPOLagTorchRLModule"
+    LEARNER_CLASS = "lac_rllib.algorithms.ppo_lag.learner.PPOLagTorchLearner"
 
     def __init__(self, algo_class=None):
-        from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
-
-        super().__init__(algo_class=algo_class or PPOLag)
-        for f in dataclasses.fields(PPOLagParams):
-            setattr(self, f.name, f.default)
+        super().__init__(algo_class=algo_class)
         # RLlib settings PPO-Lag pins.
         self.use_kl_loss = False  # no adaptive KL penalty; the early stop bounds the step [O, S]
         self.entropy_coeff = 0.0  # [O entropy_coef, S ent_reg]
@@ -202,32 +205,6 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
         self.grad_clip_by = "global_norm"  # [O clip_grad_norm_]
         self.shuffle_batch_per_epoch = True  # [O DataLoader(shuffle=True)]
         self.rollout_fragment_length = "auto"
-
-    def task(self, task_id: str, *, preset: str | None = None) -> "PPOLagConfig":
-        super().task(task_id, preset=preset)
-        self.preset = preset or self.task_spec.preset
-        return self
-
-    @override(PPOConfig)
-    def training(self, **kwargs) -> "PPOLagConfig":
-        """RLlib's settings and PPO-Lag's fields; ``preset=NAME`` applies that preset first (the other
-        values of the same call win; None leaves the values as they are)."""
-        preset = kwargs.pop("preset", None)
-        if preset is not None and preset is not NotProvided:
-            if preset not in PRESETS:
-                raise ValueError(f"unknown preset {preset!r}; accepted: {', '.join(PRESETS)}")
-            kwargs = {**PRESETS[preset], **kwargs}
-            self.preset = preset
-        own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELDS.names}
-        super().training(**kwargs)
-        for name, value in own.items():
-            if value is NotProvided:
-                continue
-            if name == "hidden" and isinstance(value, list):
-                value = tuple(value)
-            FIELDS.check(name, value)
-            setattr(self, name, value)
-        return self
 
     def policy_lr_or_schedule(self):
         """The policy's lr as RLlib's ``lr_or_lr_schedule``: [[0, lr], [horizon, 0]] in env steps
@@ -246,9 +223,6 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
     @override(PPOConfig)
     def validate(self) -> None:
         super().validate()
-        for f in dataclasses.fields(PPOLagParams):
-            FIELDS.check(f.name, getattr(self, f.name))
-        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
         if self.policy_lr_schedule == "linear" and self.lr_decay_horizon is None and self.total_env_steps is None:
             raise ValueError("PPO-Lag config field total_env_steps=None is invalid with policy_lr_schedule='linear' "
                              "and no lr_decay_horizon (the decay needs a horizon); accepted: an integer >= 1, "
@@ -263,18 +237,6 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
         pipeline.insert_after(AddColumnsFromEpisodesToTrainBatch, AddCostsFromInfos())
         return pipeline
 
-    @override(PPOConfig)
-    def get_default_rl_module_spec(self) -> RLModuleSpec:
-        from lac_rllib.algorithms.ppo_lag.module import PPOLagTorchRLModule
-
-        return RLModuleSpec(module_class=PPOLagTorchRLModule)
-
-    @override(PPOConfig)
-    def get_default_learner_class(self):
-        from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
-
-        return PPOLagTorchLearner
-
     @property
     @override(PPOConfig)
     def _model_config_auto_includes(self) -> dict[str, Any]:
@@ -284,9 +246,6 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
                 "nu_init": self.nu_init, "normalize_actions": self.normalize_actions}
 
 
-#: PPO-Lag's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(PPOLagParams, "PPO-Lag")
-PPOLagConfig.PARAMS, PPOLagConfig.FIELDS = PPOLagParams, FIELDS
 CONFIG_CLASS, PARAMS = PPOLagConfig, PPOLagParams
 #: What ``lac-eval --actions`` accepts for a PPO-Lag policy: its mean action.
 ACTIONS = ("generator",)
@@ -311,16 +270,9 @@ def plan_update_s(params: dict, preset: str) -> float:
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> PPOLagConfig:
-    """The PPOLagConfig a run of ``timesteps`` env steps uses (validated; no Ray needed): the task's
-    preset (or ``sets["preset"]``), then ``sets``. The budget is the policy lr's decay horizon
-    where lr_decay_horizon is None.
-    ``cpus`` > 1 samples with that many env runners and updates with that many threads (LAC's use_cpus)."""
-    from lac_rllib.constrained.cpus import set_runners
-
-    if timesteps is not None:
-        sets = {"total_env_steps": int(timesteps), **sets}
-    sets = dict(sets)
-    config = PPOLagConfig().task(task, preset=sets.pop("preset", None)).training(**sets).debugging(seed=seed)
-    set_runners(config, num_env_runners, cpus)
-    config.validate()
-    return config
+    """The PPOLagConfig a run of ``timesteps`` env steps uses (validated; no Ray needed:
+    :meth:`~lac_rllib.constrained.task_config.SafeTaskConfig.build`): the task's preset (or
+    ``sets["preset"]``), then ``sets``. The budget is the policy lr's decay horizon where
+    lr_decay_horizon is None. ``cpus`` > 1 samples with that many env runners and updates with that
+    many threads (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
+    return PPOLagConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

@@ -22,12 +22,7 @@ from lac_rllib.constrained.off_policy import OffPolicySafeAlgorithm
 
 
 class SACLag(OffPolicySafeAlgorithm):
-    ALGO = "sac_lag"
-
-    @classmethod
-    @override(OffPolicySafeAlgorithm)
-    def get_default_config(cls) -> SACLagConfig:
-        return SACLagConfig(cls)
+    ALGO, CONFIG_CLASS = "sac_lag", SACLagConfig
 
     @override(OffPolicySafeAlgorithm)
     def training_step(self) -> None:

@@ -13,18 +13,11 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from ray.rllib.algorithms.algorithm_config import AlgorithmConfig, NotProvided
-from ray.rllib.connectors.common.batch_individual_items import BatchIndividualItems
-from ray.rllib.connectors.learner import (
-    AddNextObservationsFromEpisodesToTrainBatch,
-    AddObservationsFromEpisodesToBatch,
-)
-from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.constrained import fields, metrics
-from lac_rllib.constrained.costs import AddCostsFromInfos, DrawRows, ShuffleRows
-from lac_rllib.constrained.cpus import set_runners
+from lac_rllib.constrained.costs import DrawRows
 from lac_rllib.constrained.fields import (
     BOOL,
     FINITE,
@@ -40,7 +33,8 @@ from lac_rllib.constrained.fields import (
 )
 from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
 from lac_rllib.constrained.networks import ACTIVATIONS
-from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
+from lac_rllib.constrained.off_policy_config import OffPolicyConfig
+from lac_rllib.constrained.task_config import SafeTaskParams
 
 LAGRANGIAN_RULES = ("adam", "gradient")
 MINIBATCH_DRAWS = ("with_replacement", "shuffled_passes")
@@ -155,100 +149,52 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
 }
 
+#: SAC-Lag's fields and what each accepts (lac_rllib/algorithms/registry.py).
 FIELDS = fields.FieldSet(SACLagParams, "SAC-Lag")
-FIELD_NAMES = FIELDS.names
 
 
-class SACLagConfig(SafeTaskConfig, AlgorithmConfig):
+class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
     """Config for :class:`lac_rllib.algorithms.sac_lag.algorithm.SACLag`; the fields are
     :class:`SACLagParams`'. ``SACLagConfig().task(id)`` sets the env, its cost convention and the
     task's preset; explicit ``training(...)`` values win over the preset."""
 
-    PRESETS = PRESETS
+    PARAMS, FIELDS, PRESETS = SACLagParams, FIELDS, PRESETS
     REPORTED_KEYS = (metrics.CRITIC_LOSS, metrics.ACTOR_LOSS, metrics.Q_REWARD_MEAN, metrics.Q_COST_MEAN,
                      metrics.COST_WINDOW_MEAN)
+    ALGORITHM_CLASS = "lac_rllib.algorithms.sac_lag.algorithm.SACLag"
+    RL_MODULE_CLASS = "lac_rllib.algorithms.sac_lag.module.SACLagTorchRLModule"
+    LEARNER_CLASS = "lac_rllib.algorithms.sac_lag.learner.SACLagTorchLearner"
+    MINIBATCH_FIELD = "batch_size"
 
     def __init__(self, algo_class=None):
-        from lac_rllib.algorithms.sac_lag.algorithm import SACLag
-
-        super().__init__(algo_class=algo_class or SACLag)
-        for f in dataclasses.fields(SACLagParams):
-            setattr(self, f.name, f.default)
+        super().__init__(algo_class=algo_class)
         # RLlib fields with SAC-Lag's values.
         self.gamma = 0.99  # [O]
-        self.train_batch_size_per_learner = self.batch_size
         # The squashed Gaussian acts within the bounds and random actions come from the action
         # space: both are stored in the env's units, as the critics see them.
         self.clip_actions = False
         self.normalize_actions = False
-        self.rollout_fragment_length = "auto"
-
-    @override(AlgorithmConfig)
-    def training(self, **kwargs) -> "SACLagConfig":
-        own = {k: kwargs.pop(k) for k in list(kwargs) if k in FIELD_NAMES}
-        super().training(**kwargs)
-        for name, value in own.items():
-            if value is NotProvided:
-                continue
-            if name in ("actor_hidden", "critic_hidden") and isinstance(value, list):
-                value = tuple(value)
-            FIELDS.check(name, value)
-            setattr(self, name, value)
-        if "batch_size" in own:
-            self.train_batch_size_per_learner = self.batch_size
-        return self
 
     # ----- RLlib hooks -----
     @override(AlgorithmConfig)
     def validate(self) -> None:
         super().validate()
-        for name, value in self.params().items():
-            FIELDS.check(name, value)
-        self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
         if self.log_std_min >= self.log_std_max:
             raise ValueError(f"SAC-Lag config fields log_std_min={self.log_std_min!r} and log_std_max="
                              f"{self.log_std_max!r} are invalid together; accepted: log_std_min < log_std_max")
-
-    @override(AlgorithmConfig)
-    def get_rollout_fragment_length(self, worker_index: int = 0) -> int:
-        # "auto" splits env_steps_per_iteration (not the minibatch size) over the runners, as LAC's.
-        if self.rollout_fragment_length != "auto":
-            return self.rollout_fragment_length
-        n = self.num_envs_per_env_runner * (self.num_env_runners or 1)
-        base, extra = divmod(self.env_steps_per_iteration, n)
-        idx = max(worker_index - 1, 0)
-        return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
 
     @property
     def updates_per_iteration(self) -> int:
         """The gradient steps of an iteration that samples env_steps_per_iteration env steps."""
         return max(1, round(self.updates_per_env_step * self.env_steps_per_iteration))
 
-    @override(AlgorithmConfig)
-    def build_learner_connector(self, input_observation_space, input_action_space, device=None):
-        """RLlib's learner pipeline plus s' for the targets, then each row's cost (right after s':
-        docs/dependencies.md, "The cost column"), then the iteration's minibatch rows: drawn with
-        replacement (minibatch_draws) or the buffer's rows shuffled, as LAC's."""
-        pipeline = super().build_learner_connector(
-            input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
-        pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch())
-        pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
-        draws = (DrawRows(rows=self.updates_per_iteration * self.batch_size, seed=self.seed)
-                 if self.minibatch_draws == "with_replacement" else ShuffleRows(seed=self.seed))
-        pipeline.insert_after(BatchIndividualItems, draws)
-        return pipeline
-
-    @override(AlgorithmConfig)
-    def get_default_rl_module_spec(self) -> RLModuleSpec:
-        from lac_rllib.algorithms.sac_lag.module import SACLagTorchRLModule
-
-        return RLModuleSpec(module_class=SACLagTorchRLModule)
-
-    @override(AlgorithmConfig)
-    def get_default_learner_class(self):
-        from lac_rllib.algorithms.sac_lag.learner import SACLagTorchLearner
-
-        return SACLagTorchLearner
+    @override(OffPolicyConfig)
+    def minibatch_rows(self):
+        """The iteration's minibatch rows: drawn with replacement (minibatch_draws, OmniSafe's
+        draw), or the buffer's rows shuffled."""
+        if self.minibatch_draws == "with_replacement":
+            return DrawRows(rows=self.updates_per_iteration * self.batch_size, seed=self.seed)
+        return super().minibatch_rows()
 
     @property
     @override(AlgorithmConfig)
@@ -257,7 +203,6 @@ class SACLagConfig(SafeTaskConfig, AlgorithmConfig):
         return {**super()._model_config_auto_includes, **self.params()}
 
 
-SACLagConfig.PARAMS, SACLagConfig.FIELDS = SACLagParams, FIELDS
 CONFIG_CLASS, PARAMS = SACLagConfig, SACLagParams
 #: What ``lac-eval --actions`` accepts for a SAC-Lag policy: squash(μ(s)) (module.deterministic_action).
 ACTIONS = ("generator",)
@@ -284,12 +229,9 @@ def plan_update_s(params: dict, preset: str) -> float:
 
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> SACLagConfig:
-    """The SACLagConfig of a run on ``task`` (validated; no Ray needed), as LAC's build_config.
-
-    ``timesteps`` is accepted for the common interface; SAC-Lag has no schedule over the budget
-    [O: constant learning rates], so it changes nothing. ``cpus`` > 1 samples with that many env
-    runners and updates with that many torch threads (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
-    config = SACLagConfig().task(task).training(**sets).debugging(seed=seed)
-    set_runners(config, num_env_runners, cpus)
-    config.validate()
-    return config
+    """The SACLagConfig of a run on ``task`` (validated; no Ray needed:
+    :meth:`~lac_rllib.constrained.task_config.SafeTaskConfig.build`). ``timesteps`` is accepted for
+    the common interface; SAC-Lag has no schedule over the budget [O: constant learning rates], so
+    it changes nothing. ``cpus`` > 1 samples with that many env runners and updates with that many
+    torch threads (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
+    return SACLagConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)
