@@ -1,5 +1,5 @@
 """Getting the cost signal through RLlib: a learner connector for the per-step cost column,
-a connector that shuffles the train batch, and env-runner callbacks for episode costs.
+connectors that shuffle or draw the train batch's rows, and env-runner callbacks for episode costs.
 
 Every task reports a step's cost in ``info["cost"]`` (lac_rllib.tasks). RLlib carries infos in
 its episodes; the pieces here turn them into (a) a ``costs`` column aligned row by row with
@@ -55,7 +55,32 @@ class AddCostsFromInfos(ConnectorV2):
         return batch
 
 
-class ShuffleRows(ConnectorV2):
+class SelectRows(ConnectorV2):
+    """Replaces each module's batched train batch by the rows :meth:`pick` chooses from it, the same
+    rows in every column, so a row's observation, action, reward and cost stay together. A batch
+    whose columns differ in length is left as it is."""
+
+    # No __init__ here (each subclass seeds its own generator): RLlib records a piece's constructor
+    # arguments, to rebuild it from a checkpoint, from the frame of the piece's own __init__.
+
+    def pick(self, n: int) -> np.ndarray:
+        """The indices of the rows to keep, in order, from a batch of ``n`` rows."""
+        raise NotImplementedError
+
+    @override(ConnectorV2)
+    def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
+        for module_id, columns in batch.items():
+            if not isinstance(columns, dict):
+                continue
+            n = {len(v) for v in columns.values() if isinstance(v, np.ndarray)}
+            if len(n) != 1:
+                continue
+            idx = self.pick(n.pop())
+            batch[module_id] = {k: (v[idx] if isinstance(v, np.ndarray) else v) for k, v in columns.items()}
+        return batch
+
+
+class ShuffleRows(SelectRows):
     """Permutes the rows of the batched train batch (one permutation for all columns).
 
     Learner.update only shuffles between epochs; LAC makes exactly one pass over the buffer
@@ -66,20 +91,12 @@ class ShuffleRows(ConnectorV2):
         super().__init__(*args, **kwargs)
         self._rng = np.random.default_rng(seed)
 
-    @override(ConnectorV2)
-    def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
-        for module_id, columns in batch.items():
-            if not isinstance(columns, dict):
-                continue
-            n = {len(v) for v in columns.values() if isinstance(v, np.ndarray)}
-            if len(n) != 1:
-                continue
-            perm = self._rng.permutation(n.pop())
-            batch[module_id] = {k: (v[perm] if isinstance(v, np.ndarray) else v) for k, v in columns.items()}
-        return batch
+    @override(SelectRows)
+    def pick(self, n: int) -> np.ndarray:
+        return self._rng.permutation(n)
 
 
-class DrawRows(ConnectorV2):
+class DrawRows(SelectRows):
     """Draws ``rows`` rows of the batched train batch uniformly *with* replacement (one index
     array for all columns): each minibatch the learner then cuts from it in order is a uniform
     draw from the buffer, as OmniSafe's ``OffPolicyBuffer.sample_batch`` (``torch.randint``) makes
@@ -92,17 +109,9 @@ class DrawRows(ConnectorV2):
         self.rows = int(rows)
         self._rng = np.random.default_rng(seed)
 
-    @override(ConnectorV2)
-    def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
-        for module_id, columns in batch.items():
-            if not isinstance(columns, dict):
-                continue
-            n = {len(v) for v in columns.values() if isinstance(v, np.ndarray)}
-            if len(n) != 1:
-                continue
-            idx = self._rng.integers(0, n.pop(), size=self.rows)
-            batch[module_id] = {k: (v[idx] if isinstance(v, np.ndarray) else v) for k, v in columns.items()}
-        return batch
+    @override(SelectRows)
+    def pick(self, n: int) -> np.ndarray:
+        return self._rng.integers(0, n, size=self.rows)
 
 
 class EpisodeCostCallback(RLlibCallback):
