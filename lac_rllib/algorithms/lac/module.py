@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 import torch
 from ray.rllib.core.columns import Columns
-from ray.rllib.core.learner.utils import make_target_network
-from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
+from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
+from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
 from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 
 # Keys of the forward_train output, declared once.
@@ -36,8 +36,8 @@ ACTOR_TARGET_ACTION = "actor_target_action"  # ã, the maximum-likelihood target
 CHAIN = "chain"  # ChainResult of the critic-target chain
 
 
-class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
-    framework = "torch"
+class LACTorchRLModule(ActorCriticRLModule):
+    TARGETS = {"actor": "target_actor", "critics": "target_critics"}
 
     @override(TorchRLModule)
     def setup(self):
@@ -55,15 +55,6 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
         self.chain_settings = chain_settings(cfg, self.action_space)
 
     # ----- acting (env runners) -----
-    @override(TorchRLModule)
-    def _forward_inference(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
-        mean, log_std = self.actor(batch[Columns.OBS])
-        return {Columns.ACTION_DIST_INPUTS: torch.cat([mean, log_std], dim=-1)}
-
-    @override(TorchRLModule)
-    def _forward_exploration(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
-        return self._forward_inference(batch)
-
     def deterministic_action(self, obs: torch.Tensor) -> torch.Tensor:
         """The generator's mean μ_φ(s): what inference acts with (``lac-eval --actions generator``)."""
         return self.actor(obs)[0]
@@ -130,21 +121,8 @@ class LACTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
 
     # ----- RLlib APIs -----
     @override(TargetNetworkAPI)
-    def make_target_networks(self) -> None:
-        self.target_actor = make_target_network(self.actor)
-        self.target_critics = make_target_network(self.critics)
-
-    @override(TargetNetworkAPI)
-    def get_target_network_pairs(self):
-        return [(self.actor, self.target_actor), (self.critics, self.target_critics)]
-
-    @override(TargetNetworkAPI)
     def forward_target(self, batch: dict[str, Any]) -> dict[str, Any]:
         return {"q": self.target_critics(batch[Columns.OBS], batch[Columns.ACTIONS])}
-
-    @override(InferenceOnlyAPI)
-    def get_non_inference_attributes(self) -> list[str]:
-        return ["critics", "target_critics", "target_actor"]
 
 
 def chain_settings(cfg: dict, action_space) -> ChainSettings:

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 import torch
 from ray.rllib.core.columns import Columns
-from ray.rllib.core.learner.utils import make_target_network
-from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, TargetNetworkAPI
+from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
+from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
 from lac_rllib.constrained.networks import CriticEnsemble
 
 # Keys of the forward outputs, declared once.
@@ -39,8 +39,8 @@ Q_REWARD_PI = "q_reward_pi"  # (2, B) Q_R at (s, ã), critics' weights frozen
 Q_COST_PI = "q_cost_pi"  # (B,) Q_C at (s, ã), critic's weights frozen
 
 
-class SACLagTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
-    framework = "torch"
+class SACLagTorchRLModule(ActorCriticRLModule):
+    TARGETS = {"reward_critics": "target_reward_critics", "cost_critic": "target_cost_critic"}
 
     @override(TorchRLModule)
     def setup(self):
@@ -65,15 +65,6 @@ class SACLagTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
                                               activation=activation)
 
     # ----- acting (env runners) -----
-    @override(TorchRLModule)
-    def _forward_inference(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
-        mean, log_std = self.actor(batch[Columns.OBS])
-        return {Columns.ACTION_DIST_INPUTS: torch.cat([mean, log_std], dim=-1)}
-
-    @override(TorchRLModule)
-    def _forward_exploration(self, batch: dict[str, Any], **kwargs) -> dict[str, Any]:
-        return self._forward_inference(batch)
-
     def deterministic_action(self, obs: torch.Tensor) -> torch.Tensor:
         """squash(μ(s)): tanh of the mean on the action bounds, what evaluation acts with
         (OmniSafe's ``predict(deterministic=True)``)."""
@@ -122,22 +113,9 @@ class SACLagTorchRLModule(TorchRLModule, InferenceOnlyAPI, TargetNetworkAPI):
 
     # ----- RLlib APIs -----
     @override(TargetNetworkAPI)
-    def make_target_networks(self) -> None:
-        self.target_reward_critics = make_target_network(self.reward_critics)
-        self.target_cost_critic = make_target_network(self.cost_critic)
-
-    @override(TargetNetworkAPI)
-    def get_target_network_pairs(self):
-        return [(self.reward_critics, self.target_reward_critics), (self.cost_critic, self.target_cost_critic)]
-
-    @override(TargetNetworkAPI)
     def forward_target(self, batch: dict[str, Any]) -> dict[str, Any]:
         obs, action = batch[Columns.OBS], batch[Columns.ACTIONS]
         return {Q_REWARD: self.target_reward_critics(obs, action), Q_COST: self.target_cost_critic(obs, action)[0]}
-
-    @override(InferenceOnlyAPI)
-    def get_non_inference_attributes(self) -> list[str]:
-        return ["reward_critics", "cost_critic", "target_reward_critics", "target_cost_critic"]
 
 
 @contextlib.contextmanager
