@@ -169,8 +169,11 @@ def test_cost_gae_ignores_the_phantom_rows_cost():
 
 
 # ----- the PPO loss gets (A_R − ν·A_C)/(1 + ν) -----
-def test_the_ppo_loss_gets_the_lagrangian_advantage(monkeypatch):
-    lrn = learner(lagrangian_lr=0.0, minibatch_size=None, num_epochs=1)  # ν stays where it is set
+@pytest.mark.parametrize("path", ["rllib", "fused"])
+def test_the_ppo_loss_gets_the_lagrangian_advantage(monkeypatch, path):
+    """On RLlib's path, RLlib's PPO loss receives the Lagrangian advantage as its ADVANTAGES
+    column; on the fused path the learner's own loss (fused_loss) is handed it."""
+    lrn = learner(lagrangian_lr=0.0, minibatch_size=None, num_epochs=1, update_path=path)  # ν stays where set
     lrn.module[DEFAULT_MODULE_ID].nu.fill_(0.7)
     seen = {}
 
@@ -180,10 +183,16 @@ def test_the_ppo_loss_gets_the_lagrangian_advantage(monkeypatch):
             return original[level](self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
         return wrapped
 
+    def record_fused(self, module_id, config, module, batch, fwd_out, advantages):
+        seen["ppo"] = {Postprocessing.ADVANTAGES: advantages.detach().clone()}
+        return original["fused"](self, module_id, config, module, batch, fwd_out, advantages)
+
     ours = type(lrn)
-    original = {"ours": ours.compute_loss_for_module, "ppo": PPOTorchLearner.compute_loss_for_module}
+    original = {"ours": ours.compute_loss_for_module, "ppo": PPOTorchLearner.compute_loss_for_module,
+                "fused": ours.fused_loss}
     monkeypatch.setattr(ours, "compute_loss_for_module", record("ours"))
     monkeypatch.setattr(PPOTorchLearner, "compute_loss_for_module", record("ppo"))
+    monkeypatch.setattr(ours, "fused_loss", record_fused)
     result = lrn.update(episodes=[episode(8, cost=lambda t: 2 * t + 1), episode(5, cost=1.0, seed=1)],
                         timesteps={TS_EPISODE_COSTS: [30.0]}, num_epochs=1, minibatch_size=None)
 
