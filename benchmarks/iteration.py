@@ -334,6 +334,13 @@ def table(task: str, results: dict[str, dict[str, float]]) -> str:
     return "\n".join(lines)
 
 
+def _write(path: str | None, lines: list[str]) -> None:
+    """The tables (markdown) to ``--out``, if given."""
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text("\n".join(lines))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--tasks", nargs="+", default=list(DEFAULT_TASKS))
@@ -391,9 +398,7 @@ def main(argv=None) -> int:
                 print(lines[-1], flush=True)
             out += [*lines, ""]
         print("\n".join(out))
-        if args.out:
-            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(args.out).write_text("\n".join(out))
+        _write(args.out, out)
         return 0
     if args.algos and args.cpus:
         for task in args.tasks:
@@ -410,9 +415,7 @@ def main(argv=None) -> int:
                 print(lines[-1], flush=True)  # progress; the table follows
             out += [*lines, ""]
         print("\n".join(out))
-        if args.out:
-            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(args.out).write_text("\n".join(out))
+        _write(args.out, out)
         return 0
     if args.algos:
         for task in args.tasks:
@@ -427,9 +430,7 @@ def main(argv=None) -> int:
                              f"| {a} | {r['seconds']:.1f} | – | {r['calls']:.0f} | – |")
             print("\n".join(lines) + "\n", flush=True)
             out += [*lines, ""]
-        if args.out:
-            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(args.out).write_text("\n".join(out))
+        _write(args.out, out)
         return 0
     if args.cpus:
         # The current defaults, then each --variant (e.g. bf16:langevin_dtype=bfloat16), on 1 and N CPUs.
@@ -442,9 +443,7 @@ def main(argv=None) -> int:
                 text = cpus_table(f"{task}, {name}", args.cpus, one, many)
                 print(text + "\n", flush=True)
                 out += [text, ""]
-        if args.out:
-            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(args.out).write_text("\n".join(out))
+        _write(args.out, out)
         return 0
     for task in args.tasks:
         prefill = prefill_episodes(task, args.seed)
@@ -457,9 +456,7 @@ def main(argv=None) -> int:
         text = table(task, results)
         print("\n" + text + "\n", flush=True)
         out += [text, ""]
-    if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text("\n".join(out))
+    _write(args.out, out)
     return 0
 
 

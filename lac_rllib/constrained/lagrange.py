@@ -169,3 +169,13 @@ class LagrangeMultiplier:
     def set_state(self, state: dict) -> None:
         self.rule.set_state(state["rule"])
         self.bound.set_state(state["bound"])
+
+
+def restore_multipliers(multipliers: dict, modules, saved: dict) -> None:
+    """After a learner's ``set_state``: each module's multiplier bound again to the module's ν
+    buffer (RLlib's restore replaced the module's tensors), then its rule's state from ``saved``
+    (module id → ``LagrangeMultiplier.get_state()``; modules missing from it keep theirs)."""
+    for mid, module in modules.items():
+        multipliers[mid].bind(module.unwrapped().nu)
+    for mid, state in saved.items():
+        multipliers[mid].set_state(state)

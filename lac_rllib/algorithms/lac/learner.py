@@ -25,7 +25,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.gradients import clip_global_norm_, polyak_, zero_non_finite_
-from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
+from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (
     ACTOR_KL,
     ACTOR_LOSS,
@@ -218,8 +218,5 @@ class LACTorchLearner(TorchLearner):
     @override(TorchLearner)
     def set_state(self, state) -> None:
         super().set_state(state)
-        for mid, module in self.module.items():  # the module's ν buffer stays the multiplier's value
-            self.multipliers[mid].bind(module.unwrapped().nu)
+        restore_multipliers(self.multipliers, self.module, state.get(STATE_LAGRANGE, {}))
         self._iteration = int(state.get(STATE_ITERATION, self._iteration))
-        for mid, multiplier_state in state.get(STATE_LAGRANGE, {}).items():
-            self.multipliers[mid].set_state(multiplier_state)

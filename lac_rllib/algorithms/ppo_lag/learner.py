@@ -54,7 +54,7 @@ from ray.rllib.utils.torch_utils import explained_variance
 
 from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
 from lac_rllib.constrained.gradients import clip_global_norms_, zero_non_finite_
-from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier
+from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, declared with every other)
     COST_VF_LOSS,
     COST_WINDOW_MEAN,
@@ -317,10 +317,9 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
     @override(PPOTorchLearner)
     def set_state(self, state) -> None:
         super().set_state(state)
-        for mid, module in self.module.items():  # the module's ν buffer stays the multiplier's value
-            self.multipliers[mid].bind(module.unwrapped().nu)
-        for mid, saved in state.get(STATE_KEY, {}).items():
-            self.multipliers[mid].set_state(saved["lagrange"])
+        own = state.get(STATE_KEY, {})
+        restore_multipliers(self.multipliers, self.module, {mid: saved["lagrange"] for mid, saved in own.items()})
+        for mid, saved in own.items():
             self.cost_windows[mid].clear()
             self.cost_windows[mid].extend(saved["cost_window"])
 

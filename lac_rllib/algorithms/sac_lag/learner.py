@@ -37,7 +37,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.gradients import clip_global_norms_, polyak_, zero_non_finite_
-from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier
+from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (
     ACTOR_LOSS,
     COST_WINDOW_MEAN,
@@ -217,13 +217,10 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
     @override(TorchLearner)
     def set_state(self, state) -> None:
         super().set_state(state)
-        for mid, module in self.module.items():  # the module's ν buffer stays the multiplier's value
-            self.multipliers[mid].bind(module.unwrapped().nu)
         own = state.get(STATE_SAC_LAG)
+        restore_multipliers(self.multipliers, self.module, own["lagrange"] if own is not None else {})
         if own is not None:
             self.updates = int(own["updates"])
             self.cost_window.clear()
             self.cost_window.extend(float(c) for c in own["cost_window"])
-            for mid, multiplier_state in own["lagrange"].items():
-                self.multipliers[mid].set_state(multiplier_state)
 
