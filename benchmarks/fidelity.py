@@ -118,6 +118,7 @@ def portable_command(line: str) -> str:
 
 def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, timesteps: int,
            resume: bool = False, checkpoint_every: int = 2, cpus: int = 1):
+    from lac_rllib.algorithms.registry import DEFAULT_ALGO
     from lac_rllib.train import resumable_checkpoint
 
     d = run_dir(out, variant, seed)
@@ -125,7 +126,7 @@ def launch(out: Path, task: str, variant: str, pairs: list[str], seed: int, time
     algo, pairs = split_algo(pairs)
     cmd = [sys.executable, "-m", "lac_rllib.train", "--task", task, "--seed", str(seed),
            "--timesteps", str(timesteps), "--output", str(d), "--checkpoint-every", str(checkpoint_every)]
-    if algo != "lac":
+    if algo != DEFAULT_ALGO:
         cmd += ["--algo", algo]
     if cpus != 1:
         cmd += ["--cpus", str(cpus)]  # lac-train's: N env runners and N learner threads

@@ -250,10 +250,9 @@ def time_algorithm(algo: str, task: str, seed: int, steps: int, cpus: int = 1, t
     """Seconds of ``algo``'s training over ``steps`` env steps after a warm-up of ``steps``, its
     update calls, and the seconds of one update call of one minibatch (RLlib's per-call overhead
     plus one step); on ``cpus`` CPUs (lac-train --cpus), or with ``threads`` learner threads."""
-    from lac_rllib.algorithms.registry import build_config
+    from lac_rllib.algorithms.registry import benchmark_fields, build_config
 
-    sets = {"lac": {"random_iterations": 0, "actor_update_start_iteration": 0},
-            "sac_lag": {"random_env_steps": steps // 2}}.get(algo, {})
+    sets = benchmark_fields(algo, "iteration", steps)
     if threads > 1:
         sets = {**sets, "torch_threads": threads}
     config = build_config(algo, task, seed, sets, timesteps=10**9, cpus=cpus)
@@ -290,9 +289,9 @@ def time_algorithm(algo: str, task: str, seed: int, steps: int, cpus: int = 1, t
 def time_update_paths(algo: str, task: str, seed: int, steps: int) -> dict[str, float]:
     """Seconds per ``steps`` env steps of ``algo``'s training on each update path, the two built
     from one seed and stepped iteration by iteration in turn (the machine's load falls on both)."""
-    from lac_rllib.algorithms.registry import build_config
+    from lac_rllib.algorithms.registry import benchmark_fields, build_config
 
-    sets = {"sac_lag": {"random_env_steps": steps // 2}}.get(algo, {})
+    sets = benchmark_fields(algo, "iteration", steps)
     algos = {path: build_config(algo, task, seed, {**sets, "update_path": path}, timesteps=10**9).build_algo()
              for path in ("rllib", "fused")}
     seconds = dict.fromkeys(algos, 0.0)
@@ -421,10 +420,12 @@ def main(argv=None) -> int:
         for task in args.tasks:
             lines = [f"### {task}", "", f"| algorithm | s per {args.steps:,} env steps | / LAC | update calls | "
                      "per-call overhead share |", "|---|---:|---:|---:|---:|"]
+            from lac_rllib.algorithms.registry import DEFAULT_ALGO
+
             times = {a: time_algorithm(a, task, args.seed, args.steps) for a in args.algos.split(",")}
             for a, r in times.items():
                 share = r["calls"] * r["per_call_s"] / r["seconds"] if r["per_call_s"] == r["per_call_s"] else None
-                lac = times.get("lac", {}).get("seconds")
+                lac = times.get(DEFAULT_ALGO, {}).get("seconds")
                 lines.append(f"| {a} | {r['seconds']:.1f} | {r['seconds'] / lac:.2f}x | {r['calls']:.0f} | "
                              + ("–" if share is None else f"≤ {share:.1%}") + " |" if lac else
                              f"| {a} | {r['seconds']:.1f} | – | {r['calls']:.0f} | – |")

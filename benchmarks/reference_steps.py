@@ -28,13 +28,17 @@ def _mlp(*parts) -> torch.nn.Sequential:
 
 
 class PPOLagStep:
+    @staticmethod
+    def warmup_iterations(steps: int) -> int:
+        return 1
+
     def __init__(self, module, config):
         self.actor = _mlp(module.encoder.actor_encoder, module.pi)
         self.log_std = copy.deepcopy(module.pi.log_std)
         self.critic = _mlp(module.encoder.critic_encoder, module.vf)
         self.cost_critic = _mlp(module.cost_vf.encoder, module.cost_vf.head)
         self.nu = float(module.nu)
-        self.config = config
+        self.config, self.minibatch_rows = config, config.minibatch_size
         lr = float(config.lr)  # the decay's start: a constant rate costs the same
         self.networks = {"policy": [*self.actor.parameters(), self.log_std],
                          "critic": list(self.critic.parameters()), "cost_critic": list(self.cost_critic.parameters())}
@@ -69,11 +73,15 @@ class PPOLagStep:
 
 
 class SACLagStep:
+    @staticmethod
+    def warmup_iterations(steps: int) -> int:
+        return 2000 // steps + 1  # past benchmark_fields' 2,000 random steps
+
     def __init__(self, module, config):
         from lac_rllib.algorithms.sac_lag.learner import actor_loss, critic_targets  # plain functions
 
         self.m = copy.deepcopy(module)
-        self.config, self.updates = config, 0
+        self.config, self.updates, self.minibatch_rows = config, 0, config.batch_size
         self.critic_targets, self.actor_loss = critic_targets, actor_loss
         self.critics = [list(self.m.reward_critics.parameters()), list(self.m.cost_critic.parameters())]
         self.critic_optimizers = [torch.optim.Adam(ps, lr=config.critic_lr, fused=True) for ps in self.critics]
@@ -108,6 +116,10 @@ class SACLagStep:
                         t.lerp_(p, self.config.polyak_tau)
 
 
+#: algo → its plain-torch step.
+STEPS = {"ppo_lag": PPOLagStep, "sac_lag": SACLagStep}
+
+
 def make_batch(algo: str, module, rows: int, seed: int = 0) -> dict:
     """A minibatch of ``rows`` rows for ``algo``'s step, shaped as its learner's (random values;
     PPO-Lag's log-probabilities the current policy's, so its ratios start at 1; a few rows
@@ -116,7 +128,7 @@ def make_batch(algo: str, module, rows: int, seed: int = 0) -> dict:
     obs_dim, act_dim = module.observation_space.shape[0], module.action_space.shape[0]
     obs = torch.randn(rows, obs_dim, generator=gen)
     actions = torch.rand(rows, act_dim, generator=gen) * 2 - 1
-    if algo == "ppo_lag":
+    if STEPS[algo] is PPOLagStep:
         with torch.no_grad():
             logits = module.action_dist_inputs(obs)
             dist = module.get_train_action_dist_cls().from_logits(logits)

@@ -30,15 +30,13 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PATHS = ("rllib", "fused")
-ALGOS = ("ppo_lag", "sac_lag")
 
 
 def _build(algo: str, task: str, path: str, steps: int):
-    from lac_rllib.algorithms.registry import build_config
+    from lac_rllib.algorithms.registry import benchmark_fields, build_config
 
-    sets = {"ppo_lag": {"train_batch_size_per_learner": 10 * steps, "target_kl": None},
-            "sac_lag": {"random_env_steps": 2000, "env_steps_per_iteration": steps}}[algo]
-    return build_config(algo, task, 0, {**sets, "update_path": path}, timesteps=10**7).build_algo()
+    sets = {**benchmark_fields(algo, "update_step", steps), "update_path": path}
+    return build_config(algo, task, 0, sets, timesteps=10**7).build_algo()
 
 
 def _timed_update(algo) -> float:
@@ -70,9 +68,8 @@ def _reference(name: str, algo, n: int):
 
     learner = algo.learner_group._learner
     module = learner.module["default_policy"].unwrapped()
-    step = (R.PPOLagStep if name == "ppo_lag" else R.SACLagStep)(module, learner.config)
-    size = learner.config.minibatch_size if name == "ppo_lag" else learner.config.batch_size
-    return step, [R.make_batch(name, module, size, seed=i) for i in range(n)]
+    step = R.STEPS[name](module, learner.config)
+    return step, [R.make_batch(name, module, step.minibatch_rows, seed=i) for i in range(n)]
 
 
 def _timed_reference(step, batches) -> float:
@@ -85,18 +82,21 @@ def _timed_reference(step, batches) -> float:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", default="SafetyPointGoal1-v0")
-    parser.add_argument("--algos", default=",".join(ALGOS))
+    parser.add_argument("--algos", default=None, help="default: every algorithm reference_steps.py has a step of")
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
+    import reference_steps
+
     from lac_rllib.tasks import get_task
 
+    args.algos = args.algos or ",".join(reference_steps.STEPS)
     try:  # bad input, before Ray starts
         get_task(args.task)
         for name in args.algos.split(","):
-            if name not in ALGOS:
-                raise ValueError(f"--algos {name!r}; accepted: {', '.join(ALGOS)} (LAC's step is its chain's: "
-                                 "benchmarks/langevin.py)")
+            if name not in reference_steps.STEPS:
+                raise ValueError(f"--algos {name!r}; accepted: {', '.join(reference_steps.STEPS)} (the baselines with "
+                                 "a plain-torch step; LAC's step is its chain's: benchmarks/langevin.py)")
         if args.steps < 10 or args.repeats < 1:
             raise ValueError(f"--steps {args.steps} / --repeats {args.repeats}; "
                              "accepted: --steps >= 10, --repeats >= 1")
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
         algos = {path: _build(name, args.task, path, args.steps) for path in PATHS}
         try:
             for a in algos.values():  # warm-up: SAC-Lag's random phase, first allocations
-                for _ in range(1 if name == "ppo_lag" else 2000 // args.steps + 1):
+                for _ in range(reference_steps.STEPS[name].warmup_iterations(args.steps)):
                     a.train()
             times = {path: [] for path in PATHS}
             plain = []

@@ -96,11 +96,9 @@ def test_no_algorithm_folder_imports_another():
     assert not crossing, crossing
 
 
-#: Modules outside the algorithm folders that still name an algorithm in code (issue 32 item 1:
-#: the evaluator's Langevin mode and the benchmarks' builders move into the folders next);
-#: reference_steps.py is per algorithm by design: a plain-torch copy of each baseline's step.
-STILL_NAMING = {"benchmarks/update_step.py", "benchmarks/iteration.py", "benchmarks/fidelity.py",
-                "benchmarks/reference_steps.py"}
+#: The one module outside the algorithm folders that names algorithms in code, by design: the
+#: plain-torch copy of each baseline's step, which update_step.py times beside the learners'.
+STILL_NAMING = {"benchmarks/reference_steps.py"}
 
 
 def test_no_module_outside_the_algorithm_folders_names_an_algorithm():

@@ -12,7 +12,8 @@ docs treat every algorithm alike:
 - ``build_config(task, seed, sets, num_env_runners=0, timesteps=None, cpus=1)``: the validated config;
 - optional, read through the functions below (an algorithm without them gets their defaults):
   ``BUDGET_FIELDS`` (a sweep's named budget → task preset or ``"*"`` → the fields it sets: the
-  smoke and quick sizes), ``plan_update_s(params, preset)`` (the plan's estimate of its update
+  smoke and quick sizes), ``benchmark_fields(benchmark, steps)`` (what benchmarks/update_step.py
+  and iteration.py build it with), ``plan_update_s(params, preset)`` (the plan's estimate of its update
   seconds per env step on one CPU), and on ``CONFIG_CLASS`` ``REPORTED_KEYS`` (the learner's values
   an iteration's row carries) and ``TASK_FAMILY_OVERRIDES`` (fields per task family).
 
@@ -154,6 +155,13 @@ def budget_fields(algo: str, budget: str, preset: str) -> dict:
     ``BUDGET_FIELDS``; none declared: its preset's values)."""
     by_preset = getattr(algo_config(algo), "BUDGET_FIELDS", {}).get(budget, {})
     return dict(by_preset.get(preset, by_preset.get("*", {})))
+
+
+def benchmark_fields(algo: str, benchmark: str, steps: int) -> dict:
+    """The fields ``algo`` is built with to be timed by ``benchmark`` (``"update_step"``,
+    ``"iteration"``) over ``steps`` (its ``benchmark_fields``; none declared: none)."""
+    fields = getattr(algo_config(algo), "benchmark_fields", None)
+    return dict(fields(benchmark, steps)) if fields else {}
 
 
 def plan_update_s(algo: str, params: dict, preset: str) -> float:

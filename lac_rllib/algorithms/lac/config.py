@@ -303,6 +303,13 @@ BUDGET_FIELDS = {
 CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
 
 
+
+def benchmark_fields(benchmark: str, steps: int) -> dict:
+    """What iteration.py times LAC with: no random phase and no actor delay, so that every timed
+    iteration is a training one."""
+    return {"random_iterations": 0, "actor_update_start_iteration": 0} if benchmark == "iteration" else {}
+
+
 def plan_update_s(params: dict, preset: str) -> float:
     """Update seconds per env step on one CPU beyond sampling (the plan's estimate): the chain's
     share, which grows with T."""

@@ -262,6 +262,13 @@ BUDGET_FIELDS = {
 }
 
 
+
+def benchmark_fields(benchmark: str, steps: int) -> dict:
+    """What the speed benchmarks build PPO-Lag with: update_step.py, an iteration of 10·``steps``
+    env steps with the KL early stop off (every epoch makes all its minibatch steps)."""
+    return {"train_batch_size_per_learner": 10 * steps, "target_kl": None} if benchmark == "update_step" else {}
+
+
 def plan_update_s(params: dict, preset: str) -> float:
     """Update seconds per env step on one CPU beyond sampling (the plan's estimate, measured at the
     tiny sizes)."""

@@ -221,6 +221,16 @@ BUDGET_FIELDS = {
 }
 
 
+
+def benchmark_fields(benchmark: str, steps: int) -> dict:
+    """What the speed benchmarks build SAC-Lag with: update_step.py, 2,000 random env steps and
+    then iterations of ``steps`` (one gradient step each); iteration.py, the random steps within
+    the warm-up of ``steps``."""
+    if benchmark == "update_step":
+        return {"random_env_steps": 2000, "env_steps_per_iteration": steps}
+    return {"random_env_steps": steps // 2}
+
+
 def plan_update_s(params: dict, preset: str) -> float:
     """Update seconds per env step on one CPU beyond sampling (the plan's estimate, measured at the
     tiny sizes): per gradient update, times the updates per env step."""
