@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from ray.rllib.algorithms.algorithm_config import NotProvided
-
 from lac_rllib.algorithms.ppo_lag import config as ppo_lag
 from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
@@ -32,8 +30,6 @@ class ToyParams(ppo_lag.PPOLagParams):
 
 
 FIELDS = FieldSet(ToyParams, "Toy")
-#: The fields PPO-Lag's config does not know: the toy sets and checks them itself.
-OWN = tuple(sorted(FIELDS.names - ppo_lag.FIELDS.names))
 
 
 class ToyLearner(PPOLagTorchLearner):
@@ -45,38 +41,18 @@ class ToyLearner(PPOLagTorchLearner):
 
 
 class ToyConfig(ppo_lag.PPOLagConfig):
+    """PPO-Lag's config with the toy's fields and classes: the shared layer (SafeTaskConfig) sets,
+    checks and validates every field of ``PARAMS``, the toy's own included."""
+
     PARAMS, FIELDS = ToyParams, FIELDS
     REPORTED_KEYS = (*ppo_lag.PPOLagConfig.REPORTED_KEYS, TOY_MARKER)
-
-    def __init__(self, algo_class=None):
-        super().__init__(algo_class=algo_class or ToyAlgo)
-        for name in OWN:
-            setattr(self, name, FIELDS.defaults[name])
-
-    def training(self, **kwargs) -> ToyConfig:
-        own = {k: kwargs.pop(k) for k in OWN if k in kwargs}
-        super().training(**kwargs)
-        for name, value in own.items():
-            if value is not NotProvided:
-                FIELDS.check(name, value)
-                setattr(self, name, value)
-        return self
-
-    def validate(self) -> None:
-        super().validate()
-        for name in OWN:
-            FIELDS.check(name, getattr(self, name))
-
-    def get_default_learner_class(self):
-        return ToyLearner
+    ALGORITHM_CLASS = f"{__name__}.ToyAlgo"
+    LEARNER_CLASS = f"{__name__}.ToyLearner"
 
 
 class ToyAlgo(PPOLag):
     ALGO = __name__  # its import path: what runs and checkpoints name it by
-
-    @classmethod
-    def get_default_config(cls) -> ToyConfig:
-        return ToyConfig(cls)
+    CONFIG_CLASS = ToyConfig
 
 
 CONFIG_CLASS, PARAMS, PRESETS = ToyConfig, ToyParams, ppo_lag.PRESETS
@@ -84,15 +60,4 @@ SPEED_FIELDS, ACTIONS = ppo_lag.SPEED_FIELDS, ("generator",)
 #: Its own smoke sizes, smaller than PPO-Lag's (500-step iterations, 32-wide networks, 2 epochs).
 BUDGET_FIELDS = {"smoke": {"*": {"train_batch_size_per_learner": 400, "minibatch_size": 100, "num_epochs": 1,
                                  "hidden": (16, 16), "num_envs_per_env_runner": 1}}}
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0, timesteps: int | None = None,
-                 cpus: int = 1) -> ToyConfig:
-    """As PPO-Lag's, with the toy's config: the task's preset, then ``sets``, validated."""
-    from lac_rllib.constrained.cpus import set_runners
-
-    sets = {"total_env_steps": int(timesteps), **sets} if timesteps is not None else dict(sets)
-    config = ToyConfig().task(task, preset=sets.pop("preset", None)).training(**sets).debugging(seed=seed)
-    set_runners(config, num_env_runners, cpus)
-    config.validate()
-    return config
+build_config = ToyConfig.build
