@@ -106,6 +106,9 @@ class FusedMinibatchLoop(TorchLearner):
     #: minibatch's losses with window 1, so an update reports its last minibatch's: in the fused
     #: loop only that one computes and logs them (True on RLlib's path, which cannot tell).
     reports_minibatch: bool = True
+    #: The train batch's columns the learner's forward and losses read (None: every tensor column);
+    #: the fused loop gathers only these for each minibatch.
+    MINIBATCH_COLUMNS: tuple[str, ...] | None = None
 
     @override(TorchLearner)
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
@@ -117,7 +120,9 @@ class FusedMinibatchLoop(TorchLearner):
         plan, self._minibatch_plan = getattr(self, "_minibatch_plan", None), None
         if plan is None:
             return super()._update(batch)
-        columns = {mid: {k: v for k, v in b.items() if isinstance(v, torch.Tensor)} for mid, b in batch.items()}
+        wanted = self.MINIBATCH_COLUMNS
+        columns = {mid: {k: v for k, v in b.items() if isinstance(v, torch.Tensor) and (wanted is None or k in wanted)}
+                   for mid, b in batch.items()}
         sizes = {mid: len(b) for mid, b in batch.items()}
         for mid in batch:
             self.module[mid].train()  # once; TorchRLModule.forward_train sets it on every minibatch

@@ -47,6 +47,7 @@ from ray.rllib.algorithms.ppo.ppo import (
 )
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
 from ray.rllib.core.columns import Columns
+from ray.rllib.core.distribution.torch.torch_distribution import TorchDiagGaussian
 from ray.rllib.core.learner.learner import ENTROPY_KEY, POLICY_LOSS_KEY, VF_LOSS_KEY
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
@@ -108,6 +109,9 @@ class EpochProgress:
 
 
 class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
+    MINIBATCH_COLUMNS = (Columns.OBS, Columns.ACTIONS, Columns.ACTION_LOGP, Columns.LOSS_MASK,
+                         Postprocessing.ADVANTAGES, Postprocessing.VALUE_TARGETS, COST_ADVANTAGES, COST_VALUE_TARGETS)
+
     @override(PPOTorchLearner)
     def build(self) -> None:
         torch.set_num_threads(self.config.torch_threads)
@@ -188,12 +192,15 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         keeping the last)."""
         mask = batch[Columns.LOSS_MASK]
         num_valid = torch.sum(mask)
+        rows = mask.nonzero().squeeze(-1)  # the real rows, found once: x[rows] is x[mask]
 
         def masked_mean(x: torch.Tensor) -> torch.Tensor:  # RLlib's possibly_masked_mean
-            return torch.sum(x[mask]) / num_valid
+            return torch.sum(x[rows]) / num_valid
 
-        dist = module.get_train_action_dist_cls().from_logits(fwd_out[Columns.ACTION_DIST_INPUTS])
-        logp_ratio = torch.exp(dist.logp(batch[Columns.ACTIONS]) - batch[Columns.ACTION_LOGP])
+        dist_cls, logits = module.get_train_action_dist_cls(), fwd_out[Columns.ACTION_DIST_INPUTS]
+        logp = (gaussian_logp(logits, batch[Columns.ACTIONS]) if dist_cls is TorchDiagGaussian
+                else dist_cls.from_logits(logits).logp(batch[Columns.ACTIONS]))
+        logp_ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
         surrogate = torch.min(advantages * logp_ratio,
                               advantages * torch.clamp(logp_ratio, 1 - config.clip_param, 1 + config.clip_param))
         values = module.compute_values(batch, embeddings=fwd_out.get(Columns.EMBEDDINGS))
@@ -202,9 +209,10 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         vf_loss_clipped = vf_loss if math.isinf(config.vf_clip_param) else torch.clamp(vf_loss, 0, config.vf_clip_param)
         per_row = -surrogate + config.vf_loss_coeff * vf_loss_clipped
         if config.entropy_coeff:  # 0 in every preset: RLlib's term is then 0·H (its gradient 0)
-            per_row = per_row - self.entropy_coeff_schedulers_per_module[module_id].get_current_value() * dist.entropy()
+            coeff = self.entropy_coeff_schedulers_per_module[module_id].get_current_value()
+            per_row = per_row - coeff * dist_cls.from_logits(logits).entropy()
         loss = masked_mean(per_row)
-        cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[mask].mean()
+        cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[rows].mean()
         loss = loss + config.vf_loss_coeff * cost_vf_loss
         # critic_l2·Σθ² [O use_critic_norm] is not in this graph: compute_gradients adds its
         # gradient critic_l2·2θ after the backward pass (its value to the reported loss only).
@@ -216,7 +224,7 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
                     LEARNER_RESULTS_VF_LOSS_UNCLIPPED_KEY: masked_mean(vf_loss),
                     LEARNER_RESULTS_VF_EXPLAINED_VAR_KEY: explained_variance(
                         batch[Postprocessing.VALUE_TARGETS], values),
-                    ENTROPY_KEY: masked_mean(dist.entropy()),
+                    ENTROPY_KEY: masked_mean(dist_cls.from_logits(logits).entropy()),
                     LEARNER_RESULTS_KL_KEY: torch.tensor(0.0),
                     COST_VF_LOSS: cost_vf_loss,
                 }, key=module_id, window=1)
@@ -341,10 +349,18 @@ def critic_parameters(module) -> list:
 @torch.no_grad()
 def add_l2_gradient_(params: list, coeff: float) -> None:
     """p.grad += coeff·2p for every p: the gradient of coeff·Σ p² as autograd computes it
-    (pow's backward 2·p, times the coefficient the product's backward passes down, one rounding;
-    then added to the loss's own gradient, an addition in either order)."""
+    (pow's backward 2·p times the coefficient the product's backward passes down: one rounding,
+    the same as (2·coeff)·p's, a power of two apart; then added to the loss's own gradient, an
+    addition in either order)."""
     params = [p for p in params if p.grad is not None]
     if params:
-        twice = torch._foreach_mul(params, 2.0)
-        torch._foreach_mul_(twice, coeff)
-        torch._foreach_add_([p.grad for p in params], twice)
+        torch._foreach_add_([p.grad for p in params], torch._foreach_mul(params, 2.0 * coeff))
+
+
+def gaussian_logp(logits: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """``TorchDiagGaussian.from_logits(logits).logp(actions)`` op for op (torch's
+    ``Normal.log_prob`` summed over the action), without building the distribution objects."""
+    loc, log_std = logits.chunk(2, dim=-1)
+    scale = log_std.exp()
+    var = scale**2
+    return (-((actions - loc) ** 2) / (2 * var) - scale.log() - math.log(math.sqrt(2 * math.pi))).sum(-1)

@@ -83,6 +83,8 @@ def actor_loss(actor_out: dict, nu: torch.Tensor, alpha: float) -> torch.Tensor:
 
 
 class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
+    MINIBATCH_COLUMNS = (Columns.OBS, Columns.ACTIONS, Columns.NEXT_OBS, Columns.REWARDS, Columns.TERMINATEDS, COSTS)
+
     @override(TorchLearner)
     def build(self) -> None:
         torch.set_num_threads(self.config.torch_threads)
