@@ -129,19 +129,21 @@ class FusedMinibatchLoop(TorchLearner):
         rows = dict.fromkeys(sizes, 0)
         fwd_out = loss_per_module = None
         plan = list(cyclic_minibatch_indices(sizes, **plan))
-        for i, indices in enumerate(plan):
-            self.reports_minibatch = i == len(plan) - 1
-            minibatch = {}
-            for mid, idx in indices.items():
-                idx_t = torch.from_numpy(idx)
-                minibatch[mid] = {k: v.index_select(0, idx_t) for k, v in columns[mid].items()}
-                rows[mid] += len(idx)
-            # RLModule.forward_train, not TorchRLModule's: the same forward without the train() call.
-            fwd_out = {mid: RLModule.forward_train(self.module[mid], mb) for mid, mb in minibatch.items()}
-            loss_per_module = self.compute_losses(fwd_out=fwd_out, batch=minibatch)
-            gradients = self.compute_gradients(loss_per_module)
-            self.apply_gradients(self.postprocess_gradients(gradients))
-        self.reports_minibatch = True
+        try:
+            for i, indices in enumerate(plan):
+                self.reports_minibatch = i == len(plan) - 1
+                minibatch = {}
+                for mid, idx in indices.items():
+                    idx_t = torch.from_numpy(idx)
+                    minibatch[mid] = {k: v.index_select(0, idx_t) for k, v in columns[mid].items()}
+                    rows[mid] += len(idx)
+                # RLModule.forward_train, not TorchRLModule's: the same forward without the train() call.
+                fwd_out = {mid: RLModule.forward_train(self.module[mid], mb) for mid, mb in minibatch.items()}
+                loss_per_module = self.compute_losses(fwd_out=fwd_out, batch=minibatch)
+                gradients = self.compute_gradients(loss_per_module)
+                self.apply_gradients(self.postprocess_gradients(gradients))
+        finally:  # a failed update leaves RLlib's path reporting every minibatch, as it should
+            self.reports_minibatch = True
         self._log_rows_trained(rows, sizes)
         return fwd_out, loss_per_module, {}
 

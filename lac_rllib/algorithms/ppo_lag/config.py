@@ -144,10 +144,10 @@ class PPOLagParams(SafeTaskParams):
     torch_threads: int = param(1, accepts=INT_GE_1)
     """Intra-op torch threads of the learner process [D]; a sweep sets it to the CPUs of a trial."""
     update_path: str = param("fused", accepts=one_of(UPDATE_PATHS))
-    """How an update call walks its minibatches [D]: "fused", inside one learner ``_update`` (the
-    same rows in the same order and the same maths, bit for bit; lac_rllib/constrained/minibatch_loop.py),
-    or "rllib", RLlib's iterator calling ``_update`` once per minibatch (~2x slower at 64-row
-    minibatches: docs/speed.md). Speed only."""
+    """How an update call makes its steps [D]: "fused", its minibatches inside one learner
+    ``_update`` with fewer calls per step (the same rows, order and maths, bit for bit;
+    lac_rllib/constrained/minibatch_loop.py), or "rllib", RLlib's own path, one ``_update`` per
+    minibatch (1.7x slower at OmniSafe's 64-row minibatches: docs/speed.md). Speed only."""
 
 
 OMNISAFE_BUDGET = 10_000_000  # env steps of OmniSafe's on-policy benchmark runs [O PPOLag.yaml total_steps]

@@ -27,7 +27,7 @@ Two paths to the same update, bit for bit (``update_path``; tests/algorithms/tes
 default, runs the minibatches inside one ``_update`` (constrained/minibatch_loop.py) and makes each
 step in fewer calls: RLlib's loss terms computed here with their statistics on the reported
 minibatch only, the critics' L2 gradient added in closed form, the three networks' clips and Adam
-steps each in one pass of foreach ops (constrained/gradients.py, constrained/optim.py). ~2x
+steps each in one pass of foreach ops (constrained/gradients.py, constrained/optim.py): 1.7x
 faster at 64-row minibatches (docs/speed.md).
 """
 

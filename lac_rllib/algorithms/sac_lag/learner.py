@@ -36,7 +36,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.gradients import clip_global_norms_, polyak_, zero_non_finite_
+from lac_rllib.constrained.gradients import clip_global_norm_, clip_global_norms_, polyak_, zero_non_finite_
 from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (
     ACTOR_LOSS,
@@ -201,7 +201,7 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         pi_loss = actor_loss(module.forward_actor(obs), module.nu, config.alpha)
         grads = dict(zip((self.get_param_ref(p) for p in params), torch.autograd.grad(pi_loss, params)))
         if config.max_grad_norm is not None:
-            clip_global_norms_([list(grads.values())], config.max_grad_norm)
+            clip_global_norm_(list(grads.values()), config.max_grad_norm)
         zero_non_finite_(grads)
         super().apply_gradients(grads)
         self._last[module_id][ACTOR_LOSS] = pi_loss.detach()
