@@ -29,15 +29,18 @@ def _code(value) -> str:
 
 def field_groups(params_cls=LACParams) -> list[tuple[str, list[str]]]:
     """[(group title, [field names])] in the order ``params_cls`` declares them, its own fields
-    first, then those of its bases (for LAC: the fields every constrained algorithm has)."""
+    first, then those of its bases (for LAC: the fields every constrained algorithm has); a field
+    declared again by a subclass is listed where the subclass declares it."""
     groups: list[tuple[str, list[str]]] = []
+    seen: set[str] = set()  # a field a subclass declares again (its own default) is listed once, there
     for cls in [c for c in params_cls.__mro__ if dataclasses.is_dataclass(c)]:
         source = inspect.getsource(cls)
         # Line numbers (1-based, within ``source``) of the group comments, and each field's group.
         titles = {i: m.group(1) for i, line in enumerate(source.splitlines(), 1) if (m := _GROUP.match(line))}
         for node in ast.parse(source).body[0].body:
-            if not isinstance(node, ast.AnnAssign):
+            if not isinstance(node, ast.AnnAssign) or node.target.id in seen:
                 continue
+            seen.add(node.target.id)
             above = [i for i in titles if i < node.lineno]
             title = titles[max(above)] if above else "Fields"
             if not groups or groups[-1][0] != title:

@@ -3,12 +3,14 @@
 import json
 import os
 import pickle
+import re
 import shutil
 
 import numpy as np
 import pytest
 import torch
 
+from lac_rllib.algorithms.registry import algos_text
 from lac_rllib.evaluation import (
     CheckpointError,
     _Recorder,
@@ -235,7 +237,7 @@ def test_an_algorithm_not_importable_here_is_one_line(ckpt_copy):
     """A user's algorithm is imported again by the path the checkpoint names: gone, it is said so."""
     _edit_metadata(ckpt_copy, algo="gone.safe_algo")
     with pytest.raises(CheckpointError, match=r"^checkpoint algorithm is not available here: unknown algo "
-                                              r"'gone.safe_algo'; accepted: lac \| ppo_lag \| sac_lag, or the "):
+                                              r"'gone.safe_algo'; accepted: " + re.escape(algos_text()) + ", or the "):
         restore_policy(str(ckpt_copy))
 
 

@@ -8,6 +8,7 @@ import pytest
 
 import lac_rllib
 from lac_rllib.algorithms.lac.config import build_config
+from lac_rllib.algorithms.registry import algos_text
 from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 from lac_rllib.constrained.metrics import LANGEVIN_AT_BOUND
 from lac_rllib.train import CONFIG, PROGRESS, check_output, run_config, train
@@ -169,7 +170,7 @@ def test_algo_takes_a_users_module_by_its_import_path_and_refuses_a_bad_one_befo
         cli.main(["--algo", "nowhere.algo", "--timesteps", "400", "--output", str(tmp_path / "bad")])
     err = capsys.readouterr().err
     assert e.value.code == 2 and err.count("\n") == 1, err
-    assert err.startswith("lac-train: error: --algo: unknown algo 'nowhere.algo'; accepted: lac | ppo_lag | sac_lag, "
+    assert err.startswith(f"lac-train: error: --algo: unknown algo 'nowhere.algo'; accepted: {algos_text()}, "
                           "or the import path of your own algorithm's module"), err
 
     ran = {}

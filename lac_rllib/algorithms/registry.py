@@ -43,6 +43,8 @@ ALGOS: dict[str, str] = {
     "lac": "lac_rllib.algorithms.lac.config",
     "ppo_lag": "lac_rllib.algorithms.ppo_lag.config",
     "sac_lag": "lac_rllib.algorithms.sac_lag.config",
+    "focops": "lac_rllib.algorithms.focops.config",
+    "p3o": "lac_rllib.algorithms.p3o.config",
 }
 DEFAULT_ALGO = "lac"
 #: The name of the trial field that picks the algorithm (``--set algo=ppo_lag``, a grid over it).

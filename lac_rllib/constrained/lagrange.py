@@ -6,9 +6,10 @@ A :class:`LagrangeMultiplier` owns ν's update: the projected step of eq. (14),
 
 with the step itself pluggable (a :class:`StepRule`: eq. (14)'s gradient step, OmniSafe's Adam
 step, FSRL's PID controller; docs/spec.md §4), the authors' adaptive bound ν_max
-(:class:`AdaptiveBound`, [C]) or none, and its checkpoint state. Its *value* is the RLModule's ν
-buffer, which the multiplier is the only writer of: the buffer travels with the module's weights,
-so env runners, checkpoints and a restored policy (``--actions langevin``) all see the same ν.
+(:class:`AdaptiveBound`, [C]), a fixed one (:class:`FixedBound`) or none, and its checkpoint
+state. Its *value* is the RLModule's ν buffer, which the multiplier is the only writer of: the
+buffer travels with the module's weights, so env runners, checkpoints and a restored policy
+(``--actions langevin``) all see the same ν.
 
 Plain torch, no RLlib: the learners call it (``lac_rllib.algorithms.lac.learner``).
 """
@@ -131,12 +132,36 @@ class AdaptiveBound:
         self.value, self._sums = float(state["value"]), torch.tensor(state["sums"])
 
 
+class FixedBound:
+    """A constant upper bound on ν (OmniSafe's ``lagrangian_upper_bound``, FOCOPS's ``nu_max``):
+    :class:`AdaptiveBound`'s interface with nothing to observe."""
+
+    def __init__(self, value: float):
+        self.value = float(value)
+
+    def start_iteration(self) -> None:
+        pass
+
+    def observe(self, y_r: torch.Tensor, y_c: torch.Tensor) -> None:
+        pass
+
+    def end_iteration(self) -> None:
+        return None
+
+    def get_state(self) -> dict:
+        return {"value": self.value}
+
+    def set_state(self, state: dict) -> None:
+        self.value = float(state["value"])
+
+
 class LagrangeMultiplier:
     """ν ≥ 0 of one constrained module: ``value`` is its RLModule's ν buffer (a 0-d tensor) and
     this object its only writer. ``rule`` makes the step, ``bound`` tracks ȳ and, when
     ``bounded``, caps ν at its ν_max; ``bounded=False`` is eq. (14) as [P] writes it."""
 
-    def __init__(self, value: torch.Tensor, *, cost_limit: float, rule: StepRule, bound: AdaptiveBound | None = None,
+    def __init__(self, value: torch.Tensor, *, cost_limit: float, rule: StepRule,
+                 bound: AdaptiveBound | FixedBound | None = None,
                  bounded: bool = True):
         self._value, self.cost_limit, self.rule = value, float(cost_limit), rule
         self.bound, self.bounded = bound or AdaptiveBound(), bool(bounded)

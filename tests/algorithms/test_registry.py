@@ -103,9 +103,9 @@ ALGO_MODULES = {
                       "from lac_rllib.algorithms.ppo_lag.config import CONFIG_CLASS, PARAMS, FIELDS, PRESETS\n",
                       "algo borrowed_algo: its algorithm PPOLag names itself 'ppo_lag' (ALGO); accepted: "
                       "ALGO = 'borrowed_algo'"),
-    "nowhere.algo": (None, "unknown algo 'nowhere.algo'; accepted: lac | ppo_lag | sac_lag, or the import path of "
+    "nowhere.algo": (None, f"unknown algo 'nowhere.algo'; accepted: {registry.algos_text()}, or the import path of "
                            "your own algorithm's module (no module 'nowhere' on the Python path nor"),
-    "my-algo": (None, "unknown algo 'my-algo'; accepted: lac | ppo_lag | sac_lag, or the import path"),
+    "my-algo": (None, f"unknown algo 'my-algo'; accepted: {registry.algos_text()}, or the import path"),
 }
 
 

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 
+from lac_rllib.algorithms.registry import algos_text
 from sweeps import run as cli
 
 README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
@@ -117,7 +118,7 @@ def test_the_compare_space_runs_every_algorithm_at_one_budget(tmp_path, monkeypa
 @pytest.mark.parametrize("argv, needle", [
     (("--space", "compare", "--set", "algo=sac_lag"), "compare.yaml sweeps algo itself"),
     (("--space", "ablation", "--set", "algo=ppo_lag"), "groups.NI.set.langevin_start: a field of lac, not of ppo_lag"),
-    (("--space", "paper", "--set", "algo=dqn"), "unknown algo 'dqn'; accepted: lac | ppo_lag | sac_lag"),
+    (("--space", "paper", "--set", "algo=dqn"), f"unknown algo 'dqn'; accepted: {algos_text()}"),
     (("--space", "compare", "--set", "langevin_steps=5"), "a field of lac, not of ppo_lag"),
 ])
 def test_an_algorithm_a_sweep_cannot_run_is_refused_before_ray(tmp_path, monkeypatch, argv, needle):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from lac_rllib.algorithms.registry import algos_text
 from sweeps import run as cli
 from sweeps import spaces, sweep_file
 
@@ -252,8 +253,8 @@ def test_a_users_algorithm_beside_the_sweep_file_is_found(tmp_path, monkeypatch)
 
 
 BAD_ALGO = [
-    ("algo: {module: nowhere.algo}\n", r"my.yaml:1: algo\[0\]: unknown algo 'nowhere.algo'; accepted: lac \| ppo_lag "
-                                       r"\| sac_lag, or the import path of your own algorithm's module"),
+    ("algo: {module: nowhere.algo}\n", r"my.yaml:1: algo\[0\]: unknown algo 'nowhere.algo'; accepted: "
+     + re.escape(algos_text()) + r", or the import path of your own algorithm's module"),
     ("algo:\n  - lac\n  - {module: half_algo}\n",
      r"my.yaml:3: algo\[1\]: algo half_algo: its module lacks PARAMS, FIELDS"),
     ("algo: {modul: half_algo}\n", r"my.yaml:1: algo: \{'modul': 'half_algo'\}: accepted: an algorithm's name, or "

@@ -44,6 +44,7 @@ from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 POLICY_LR_SCHEDULES = ("linear", "constant")
 NU_PARAMETRIZATIONS = ("direct", "softplus")
+NU_OPTIMIZERS = ("adam", "sgd")
 ACTIVATIONS = ("tanh", "relu")
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "ssa")
 POSITIVE_OR_INF = Accepted("a number > 0 (inf: no clipping)", lambda v: isinstance(v, (int, float))
@@ -51,31 +52,19 @@ POSITIVE_OR_INF = Accepted("a number > 0 (inf: no clipping)", lambda v: isinstan
 
 
 @dataclasses.dataclass
-class PPOLagParams(SafeTaskParams):
-    """The PPO-Lag hyperparameters, after the fields every constrained algorithm has
-    (:class:`SafeTaskParams`: its obs filter is [O]'s, std floored at 1e-2 and clipped at ±5).
+class OnPolicyParams(SafeTaskParams):
+    """The fields of the on-policy family built on RLlib's PPO (PPO-Lag and the first-order
+    baselines on its house: FOCOPS, CUP, P3O, RESPO), after the fields every constrained algorithm
+    has (:class:`SafeTaskParams`: its obs filter is [O]'s, std floored at 1e-2 and clipped at ±5).
+    :class:`OnPolicyLagParams` adds the Lagrange multiplier's; each algorithm its preset and its own.
 
     Each field: ``name: type = param(default, accepts=...)`` and, below it, its docstring.
     """
 
-    # --- preset ---
-    preset: str | None = param(None, accepts=or_none(one_of(PRESET_NAMES)))
-    """The preset applied: the task's (``.task(id)``) or one named with ``.task(id, preset=...)`` /
-    ``training(preset=...)``, which applies its values first: "mujoco", "safety_gym" [O], "tiny" [D],
-    "ssa" [S] (see ``PRESETS``)."""
-
-    # --- Lagrange multiplier ---
-    nu_init: float = param(0.001, accepts=NON_NEGATIVE)
-    """ν₀ [O lagrangian_multiplier_init: 0.001; S penalty_init: 1]."""
-    lagrangian_lr: float = param(0.035, accepts=NON_NEGATIVE)
-    """Adam's learning rate for ν, one step per iteration before the policy update [O lambda_lr 0.035;
-    S penalty_lr 0.05]. 0 pins ν at nu_init (so nu_init=0 with 0 is unconstrained PPO)."""
-    nu_parametrization: str = param("direct", accepts=one_of(NU_PARAMETRIZATIONS))
-    """"direct": Adam on ν, then ν ← max(ν, 0) [O common/lagrange.py]; "softplus": ν = softplus(p),
-    Adam on the loss −p·(Ĵ_C − b) [S]."""
+    # --- episode cost ---
     cost_window: int | None = param(100, accepts=or_none(INT_GE_1))
-    """Ĵ_C for ν's step: the mean cost of the last cost_window completed episodes [O window_lens 100];
-    None = of the episodes completed in this iteration only [S]. Checkpointed with ν."""
+    """Ĵ_C (ν's step; P3O's penalty): the mean cost of the last cost_window completed episodes [O
+    window_lens 100]; None = of the episodes completed in this iteration only [S]. Checkpointed."""
 
     # --- advantages and critics ---
     cost_gamma: float = param(0.99, accepts=FRACTION)
@@ -84,6 +73,9 @@ class PPOLagParams(SafeTaskParams):
     """γ of the reward GAE (RLlib's field) [O, S]."""
     lambda_: float = param(0.95, accepts=FRACTION)
     """λ of both GAEs (RLlib's field; its default is 1.0) [O lam, lam_c 0.95; S 0.97]."""
+    standardize_cost_advantages: bool = param(False, accepts=BOOL)
+    """A^C over the batch: centred only (False) [O standardized_cost_adv: mean only; S], so ν·A^C
+    keeps the cost's scale; or centred and divided by its std (True) [F data_generator.py]."""
     critic_lr: float = param(3e-4, accepts=POSITIVE)
     """Adam learning rate of the reward and the cost critic, constant [O 3e-4; S vf_lr 1e-3]."""
     critic_l2: float = param(0.001, accepts=NON_NEGATIVE)
@@ -107,8 +99,6 @@ class PPOLagParams(SafeTaskParams):
     total_env_steps: int | None = param(None, accepts=or_none(INT_GE_1))
     """The run's budget in env steps (lac-train and the sweep set it): the linear decay's horizon
     where lr_decay_horizon is None."""
-    clip_param: float = param(0.2, accepts=POSITIVE)
-    """ε of PPO's clipped surrogate (RLlib's field; its default is 0.3) [O, S]."""
     target_kl: float | None = param(0.02, accepts=or_none(POSITIVE))
     """KL early stop [O 0.02]: after an epoch whose full-batch KL(π_old ‖ π) exceeds it, the policy
     takes no more steps this iteration (see kl_stop_late); None = off. [S] stops when KL > 1.2·0.01
@@ -148,6 +138,42 @@ class PPOLagParams(SafeTaskParams):
     ``_update`` with fewer calls per step (the same rows, order and maths, bit for bit;
     lac_rllib/constrained/minibatch_loop.py), or "rllib", RLlib's own path, one ``_update`` per
     minibatch (1.7x slower at OmniSafe's 64-row minibatches: docs/speed.md). Speed only."""
+
+
+@dataclasses.dataclass
+class OnPolicyLagParams(OnPolicyParams):
+    """The Lagrange multiplier's fields, after the on-policy family's (:class:`OnPolicyParams`)."""
+
+    # --- Lagrange multiplier ---
+    nu_init: float = param(0.001, accepts=NON_NEGATIVE)
+    """ν₀ [O lagrangian_multiplier_init: 0.001; S penalty_init: 1]."""
+    lagrangian_lr: float = param(0.035, accepts=NON_NEGATIVE)
+    """Adam's learning rate for ν, one step per iteration before the policy update [O lambda_lr 0.035;
+    S penalty_lr 0.05]. 0 pins ν at nu_init (so nu_init=0 with 0 is unconstrained PPO)."""
+    nu_parametrization: str = param("direct", accepts=one_of(NU_PARAMETRIZATIONS))
+    """"direct": Adam on ν, then ν ← max(ν, 0) [O common/lagrange.py]; "softplus": ν = softplus(p),
+    Adam on the loss −p·(Ĵ_C − b) [S]."""
+    nu_optimizer: str = param("adam", accepts=one_of(NU_OPTIMIZERS))
+    """The step on ν's loss −ν·(Ĵ_C − b) (on p with "softplus") [O lambda_optimizer]: "adam" [O, S],
+    or "sgd", eq. (14)'s plain step ν ← ν + lagrangian_lr·(Ĵ_C − b) [F focops_main.py] ("direct" only)."""
+    nu_max: float | None = param(None, accepts=or_none(POSITIVE))
+    """ν is held in [0, nu_max] after each step [O lagrangian_upper_bound: PPOLag.yaml sets none,
+    FOCOPS.yaml and CUP.yaml 2.0]; None = no upper bound."""
+
+
+@dataclasses.dataclass
+class PPOLagParams(OnPolicyLagParams):
+    """The PPO-Lag hyperparameters: its preset and clip, after the family's fields."""
+
+    # --- preset ---
+    preset: str | None = param(None, accepts=or_none(one_of(PRESET_NAMES)))
+    """The preset applied: the task's (``.task(id)``) or one named with ``.task(id, preset=...)`` /
+    ``training(preset=...)``, which applies its values first: "mujoco", "safety_gym" [O], "tiny" [D],
+    "ssa" [S] (see ``PRESETS``)."""
+
+    # --- policy ---
+    clip_param: float = param(0.2, accepts=POSITIVE)
+    """ε of PPO's clipped surrogate (RLlib's field; its default is 0.3) [O, S]."""
 
 
 OMNISAFE_BUDGET = 10_000_000  # env steps of OmniSafe's on-policy benchmark runs [O PPOLag.yaml total_steps]
@@ -223,10 +249,14 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
     @override(PPOConfig)
     def validate(self) -> None:
         super().validate()
+        if getattr(self, "nu_optimizer", "adam") == "sgd" and self.nu_parametrization != "direct":
+            raise ValueError(f"{self.FIELDS.what} config field nu_optimizer='sgd' is invalid with "
+                             f"nu_parametrization={self.nu_parametrization!r}; accepted: nu_optimizer='adam', or "
+                             "nu_parametrization='direct'")
         if self.policy_lr_schedule == "linear" and self.lr_decay_horizon is None and self.total_env_steps is None:
-            raise ValueError("PPO-Lag config field total_env_steps=None is invalid with policy_lr_schedule='linear' "
-                             "and no lr_decay_horizon (the decay needs a horizon); accepted: an integer >= 1, "
-                             "an lr_decay_horizon, or policy_lr_schedule='constant'")
+            raise ValueError(f"{self.FIELDS.what} config field total_env_steps=None is invalid with "
+                             "policy_lr_schedule='linear' and no lr_decay_horizon (the decay needs a horizon); "
+                             "accepted: an integer >= 1, an lr_decay_horizon, or policy_lr_schedule='constant'")
 
     @override(AlgorithmConfig)
     def build_learner_connector(self, input_observation_space, input_action_space, device=None):
@@ -243,7 +273,8 @@ class PPOLagConfig(SafeTaskConfig, PPOConfig):
         return {**super()._model_config_auto_includes,
                 "fcnet_hiddens": list(self.hidden), "fcnet_activation": self.activation, "head_fcnet_hiddens": [],
                 "vf_share_layers": False, "free_log_std": True, "log_std_init": self.log_std_init,
-                "nu_init": self.nu_init, "normalize_actions": self.normalize_actions}
+                "nu_init": getattr(self, "nu_init", 0.0),  # P3O has no multiplier: ν stays 0
+                "normalize_actions": self.normalize_actions}
 
 
 CONFIG_CLASS, PARAMS = PPOLagConfig, PPOLagParams

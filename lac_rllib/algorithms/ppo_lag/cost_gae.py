@@ -11,7 +11,8 @@ within a chunk (GAE, Schulman et al. 2016, eq. 16, by RLlib's ``compute_value_ta
 cuts the sum at chunk ends and bootstraps there), target_t = A^C_t + V_C(s_t). Then, on the real
 rows (``LOSS_MASK``) only:
 
-- A^C is centred, not rescaled [O onpolicy_buffer.get; S buffer.get], so ν·A^C keeps the cost's scale;
+- A^C is centred, not rescaled [O onpolicy_buffer.get; S buffer.get], so ν·A^C keeps the cost's scale
+  (``standardize``: also rescaled, as FOCOPS's own code does [F]);
 - A^R, which RLlib standardised over every row including the phantom ones, is standardised again
   over the real rows: (A − mean)/(std + 1e-8) [O]. An affine map of A^R, so this equals
   standardising the raw GAE advantages over the real rows.
@@ -42,8 +43,9 @@ COST_VALUE_TARGETS = "cost_value_targets"  # the cost critic's regression target
 KL_COLUMNS = (Columns.OBS, Columns.ACTION_DIST_INPUTS, Columns.LOSS_MASK)
 
 
-def cost_gae(costs, values, terminateds, truncateds, mask, *, gamma: float, lambda_: float):
-    """(centred A^C, V_C targets) of rows in episode-chunk order (numpy, one entry per row).
+def cost_gae(costs, values, terminateds, truncateds, mask, *, gamma: float, lambda_: float, standardize: bool = False):
+    """(centred A^C, V_C targets) of rows in episode-chunk order (numpy, one entry per row); with
+    ``standardize`` A^C is also divided by its std + 1e-8 [F data_generator.py].
 
     ``costs`` of phantom rows (``mask`` False) are ignored (taken as 0); their outputs are 0."""
     mask = np.asarray(mask, dtype=bool)
@@ -51,6 +53,8 @@ def cost_gae(costs, values, terminateds, truncateds, mask, *, gamma: float, lamb
     targets = compute_value_targets(values=values, rewards=costs, terminateds=terminateds, truncateds=truncateds,
                                     gamma=gamma, lambda_=lambda_)
     advantages = targets - values
+    if standardize:
+        return standardize_on_mask(advantages, mask), np.where(mask, targets, 0.0).astype(np.float32)
     advantages = np.where(mask, advantages - advantages[mask].mean(), 0.0).astype(np.float32)
     return advantages, np.where(mask, targets, 0.0).astype(np.float32)
 
@@ -69,9 +73,10 @@ class CostGAE(ConnectorV2):
     (``last_batch``: module id → those columns): the learner's KL early stop measures the policy's
     drift on the whole batch (learner.py)."""
 
-    def __init__(self, input_observation_space=None, input_action_space=None, *, gamma: float, lambda_: float):
+    def __init__(self, input_observation_space=None, input_action_space=None, *, gamma: float, lambda_: float,
+                 standardize: bool = False):
         super().__init__(input_observation_space, input_action_space)
-        self.gamma, self.lambda_ = float(gamma), float(lambda_)
+        self.gamma, self.lambda_, self.standardize = float(gamma), float(lambda_), bool(standardize)
         self.last_batch: dict[str, dict[str, Any]] = {}
 
     @override(ConnectorV2)
@@ -88,7 +93,8 @@ class CostGAE(ConnectorV2):
             mask = convert_to_numpy(columns[Columns.LOSS_MASK]).astype(bool)
             advantages, targets = cost_gae(
                 convert_to_numpy(columns[COSTS]), values, convert_to_numpy(columns[Columns.TERMINATEDS]),
-                convert_to_numpy(columns[Columns.TRUNCATEDS]), mask, gamma=self.gamma, lambda_=self.lambda_)
+                convert_to_numpy(columns[Columns.TRUNCATEDS]), mask, gamma=self.gamma, lambda_=self.lambda_,
+                standardize=self.standardize)
             out = {
                 COSTS: np.where(mask, convert_to_numpy(columns[COSTS]), 0.0).astype(np.float32),
                 COST_ADVANTAGES: advantages,

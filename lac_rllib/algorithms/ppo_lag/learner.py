@@ -55,7 +55,13 @@ from ray.rllib.utils.torch_utils import explained_variance
 
 from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
 from lac_rllib.constrained.gradients import clip_global_norms_, zero_non_finite_
-from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier, restore_multipliers
+from lac_rllib.constrained.lagrange import (
+    AdamStep,
+    FixedBound,
+    GradientStep,
+    LagrangeMultiplier,
+    restore_multipliers,
+)
 from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, declared with every other)
     COST_VF_LOSS,
     COST_WINDOW_MEAN,
@@ -116,7 +122,8 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
     def build(self) -> None:
         torch.set_num_threads(self.config.torch_threads)
         super().build()  # PPOLearner.build appends RLlib's GAE to the learner connector
-        self.cost_gae = CostGAE(gamma=self.config.cost_gamma, lambda_=self.config.lambda_)
+        self.cost_gae = CostGAE(gamma=self.config.cost_gamma, lambda_=self.config.lambda_,
+                                standardize=self.config.standardize_cost_advantages)
         if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
             self._learner_connector.append(self.cost_gae)  # after RLlib's GAE: it needs the complete batch
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
@@ -125,12 +132,18 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         self.progress: dict[str, EpochProgress] = {}
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
-        """ν of ``module``: Adam on ν itself [O common/lagrange.py] or on softplus⁻¹(ν) [S]; unbounded."""
+        """ν of ``module``: Adam on ν itself [O common/lagrange.py] or on softplus⁻¹(ν) [S], or the
+        plain step of eq. (14) (``nu_optimizer="sgd"`` [F]); held under ``nu_max`` if set."""
         config = self.config.get_config_for_module(module_id)
-        rule = (AdamStep(config.lagrangian_lr) if config.nu_parametrization == "direct"
-                else SoftplusAdamStep(config.lagrangian_lr, config.nu_init))
+        if config.nu_optimizer == "sgd":
+            rule = GradientStep(config.lagrangian_lr)
+        elif config.nu_parametrization == "direct":
+            rule = AdamStep(config.lagrangian_lr)
+        else:
+            rule = SoftplusAdamStep(config.lagrangian_lr, config.nu_init)
+        bound = FixedBound(config.nu_max) if config.nu_max is not None else None
         return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit, rule=rule,
-                                  bounded=False)
+                                  bound=bound, bounded=bound is not None)
 
     @override(PPOTorchLearner)
     def configure_optimizers_for_module(self, module_id, config=None) -> None:
@@ -163,13 +176,21 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
             self.progress[mid] = EpochProgress()
 
     # ----- losses -----
+    #: Whether RLlib's own PPO loss is this learner's on RLlib's update path (PPO-Lag: the reference
+    #: its fused path is checked against bit for bit). The baselines built on this learner set it
+    #: False: their loss is :meth:`fused_loss` with their own policy term on both paths.
+    RLLIB_LOSS = True
+
+    def uses_fused_loss(self, config) -> bool:
+        """Whether the loss is :meth:`fused_loss` (the critics' L2 then added to the gradients)."""
+        return config.update_path == "fused" or not self.RLLIB_LOSS
+
     @override(PPOTorchLearner)
     def compute_loss_for_module(self, *, module_id, config, batch, fwd_out) -> torch.Tensor:
         module = self.module[module_id].unwrapped()
         self.check_kl_at_epoch_end(module_id, config, module, minibatch_rows=len(batch[Columns.LOSS_MASK]))
-        nu = module.nu.detach()
-        advantages = (batch[Postprocessing.ADVANTAGES] - nu * batch[COST_ADVANTAGES]) / (1.0 + nu)
-        if config.update_path == "fused":
+        advantages = self.policy_advantages(config, module, batch)
+        if self.uses_fused_loss(config):
             return self.fused_loss(module_id, config, module, batch, fwd_out, advantages)
         loss = super().compute_loss_for_module(module_id=module_id, config=config, fwd_out=fwd_out,
                                                batch={**batch, Postprocessing.ADVANTAGES: advantages})
@@ -180,6 +201,21 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
             loss = loss + config.critic_l2 * sum((p**2).sum() for p in critic_parameters(module))
         self.metrics.log_value((module_id, COST_VF_LOSS), cost_vf_loss.detach(), window=1)
         return loss
+
+    def policy_advantages(self, config, module, batch) -> torch.Tensor:
+        """The advantage the policy's surrogate weighs, per row [O PPOLag._compute_adv_surrogate]:
+        A = (A^R − ν·A^C) / (1 + ν)."""
+        nu = module.nu.detach()
+        return (batch[Postprocessing.ADVANTAGES] - nu * batch[COST_ADVANTAGES]) / (1.0 + nu)
+
+    def policy_loss(self, module_id, config, module, batch, logits, logp, advantages, masked_mean):
+        """The policy's loss: per row (averaged over the real rows) and a term of the whole
+        minibatch beside it (None: none). PPO's clipped surrogate, negated [R, O]:
+        −min(r·A, clip(r, 1 − ε, 1 + ε)·A) with r = π(a|s)/π_old(a|s)."""
+        logp_ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
+        surrogate = torch.min(advantages * logp_ratio,
+                              advantages * torch.clamp(logp_ratio, 1 - config.clip_param, 1 + config.clip_param))
+        return -surrogate, None
 
     def fused_loss(self, module_id, config, module, batch, fwd_out, advantages) -> torch.Tensor:
         """:meth:`compute_loss_for_module`'s loss on the fused path: RLlib's PPO loss
@@ -200,18 +236,19 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         dist_cls, logits = module.get_train_action_dist_cls(), fwd_out[Columns.ACTION_DIST_INPUTS]
         logp = (gaussian_logp(logits, batch[Columns.ACTIONS]) if dist_cls is TorchDiagGaussian
                 else dist_cls.from_logits(logits).logp(batch[Columns.ACTIONS]))
-        logp_ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
-        surrogate = torch.min(advantages * logp_ratio,
-                              advantages * torch.clamp(logp_ratio, 1 - config.clip_param, 1 + config.clip_param))
+        policy_rows, policy_term = self.policy_loss(module_id, config, module, batch, logits, logp,
+                                                    advantages, masked_mean)
         values = module.compute_values(batch, embeddings=fwd_out.get(Columns.EMBEDDINGS))
         vf_loss = torch.pow(values - batch[Postprocessing.VALUE_TARGETS], 2.0)
         # A square is >= 0, so clamp(·, 0, inf) is the identity, forward and backward.
         vf_loss_clipped = vf_loss if math.isinf(config.vf_clip_param) else torch.clamp(vf_loss, 0, config.vf_clip_param)
-        per_row = -surrogate + config.vf_loss_coeff * vf_loss_clipped
+        per_row = policy_rows + config.vf_loss_coeff * vf_loss_clipped
         if config.entropy_coeff:  # 0 in every preset: RLlib's term is then 0·H (its gradient 0)
             coeff = self.entropy_coeff_schedulers_per_module[module_id].get_current_value()
             per_row = per_row - coeff * dist_cls.from_logits(logits).entropy()
         loss = masked_mean(per_row)
+        if policy_term is not None:
+            loss = loss + policy_term
         cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[rows].mean()
         loss = loss + config.vf_loss_coeff * cost_vf_loss
         # critic_l2·Σθ² [O use_critic_norm] is not in this graph: compute_gradients adds its
@@ -219,7 +256,7 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         if self.reports_minibatch:
             with torch.no_grad():
                 self.metrics.log_dict({
-                    POLICY_LOSS_KEY: -masked_mean(surrogate),
+                    POLICY_LOSS_KEY: masked_mean(policy_rows) + (0.0 if policy_term is None else policy_term),
                     VF_LOSS_KEY: masked_mean(vf_loss_clipped),
                     LEARNER_RESULTS_VF_LOSS_UNCLIPPED_KEY: masked_mean(vf_loss),
                     LEARNER_RESULTS_VF_EXPLAINED_VAR_KEY: explained_variance(
@@ -264,7 +301,7 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         grads = super().compute_gradients(loss_per_module, **kwargs)
         for mid in loss_per_module:
             config = self.config.get_config_for_module(mid)
-            if config.update_path == "fused" and config.critic_l2:
+            if self.uses_fused_loss(config) and config.critic_l2:
                 add_l2_gradient_(critic_parameters(self.module[mid].unwrapped()), config.critic_l2)
         return grads
 

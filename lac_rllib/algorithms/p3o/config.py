@@ -1,0 +1,74 @@
+"""P3OConfig: Penalized Proximal Policy Optimization on PPO-Lag's house.
+
+P3O replaces the Lagrange multiplier by an exact penalty (Zhang et al. 2022, eq. 9): the policy
+minimises PPO's clipped loss on A^R plus κ·ReLU(mean(r·A^C) + Ĵ_C − b) (learner.py). It has no
+multiplier, so its fields are the on-policy family's (:class:`OnPolicyParams`: the critics, the
+KL stop, the epochs, the cost window that gives Ĵ_C) with PPO's clip and κ; its rows still
+report ``nu``: the penalty's active weight κ·1[penalty > 0] (docs/baselines.md, "P3O").
+
+Source tags: [O] OmniSafe P3O (configs/on-policy/P3O.yaml, algorithms/.../penalty_function/p3o.py),
+[D] ours. The defaults are [O]'s (the paper ran OmniSafe's P3O with its defaults, App. D).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from lac_rllib.algorithms.ppo_lag import config as ppo_lag
+from lac_rllib.algorithms.ppo_lag.config import OMNISAFE_BUDGET, OnPolicyParams, PPOLagConfig
+from lac_rllib.constrained import fields, metrics
+from lac_rllib.constrained.fields import INT_GE_1, POSITIVE, one_of, or_none, param
+
+PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
+
+
+@dataclasses.dataclass
+class P3OParams(OnPolicyParams):
+    """The P3O hyperparameters: its preset, PPO's clip and the penalty's κ, after the on-policy
+    family's fields (no multiplier)."""
+
+    # --- preset ---
+    preset: str | None = param(None, accepts=or_none(one_of(PRESET_NAMES)))
+    """The preset applied: the task's (``.task(id)``) or one named with ``.task(id, preset=...)`` /
+    ``training(preset=...)``: "mujoco", "safety_gym" and "omnisafe" [O], "tiny" [D] (see ``PRESETS``)."""
+
+    # --- P3O ---
+    kappa: float = param(20.0, accepts=POSITIVE)
+    """κ, the weight of the exact penalty κ·ReLU(mean(r·A^C) + Ĵ_C − b) [O kappa 20]; the penalty is
+    exact (its minimiser is the constrained one) once κ exceeds the optimal multiplier (Zhang et
+    al. 2022, Thm. 1)."""
+    clip_param: float = param(0.2, accepts=POSITIVE)
+    """ε of PPO's clipped surrogate on A^R (RLlib's field) [O clip 0.2]; the cost surrogate is unclipped [O]."""
+    num_epochs: int = param(10, accepts=INT_GE_1)
+    """Passes over the iteration's batch (RLlib's field) [O P3O.yaml update_iters 10]."""
+
+
+#: P3O's fields and what each accepts (lac_rllib/algorithms/registry.py).
+FIELDS = fields.FieldSet(P3OParams, "P3O")
+PRESETS: dict[str, dict[str, Any]] = {
+    # [O] as PPO-Lag's, less its multiplier's values (the tiny preset's faster ν).
+    **{name: {k: v for k, v in values.items() if k in FIELDS.names} for name, values in ppo_lag.PRESETS.items()
+       if name != "ssa"},
+    "omnisafe": {"lr_decay_horizon": OMNISAFE_BUDGET},
+}
+
+
+class P3OConfig(PPOLagConfig):
+    """Config for :class:`lac_rllib.algorithms.p3o.algorithm.P3O`; fields: :class:`P3OParams`."""
+
+    PARAMS, FIELDS, PRESETS = P3OParams, FIELDS, PRESETS
+    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.COST_PENALTY)
+    ALGORITHM_CLASS = "lac_rllib.algorithms.p3o.algorithm.P3O"
+    LEARNER_CLASS = "lac_rllib.algorithms.p3o.learner.P3OTorchLearner"
+
+
+CONFIG_CLASS, PARAMS = P3OConfig, P3OParams
+ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = ppo_lag.ACTIONS, ppo_lag.SPEED_FIELDS, ppo_lag.BUDGET_FIELDS
+benchmark_fields, plan_update_s = ppo_lag.benchmark_fields, ppo_lag.plan_update_s
+
+
+def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
+                 timesteps: int | None = None, cpus: int = 1) -> P3OConfig:
+    """The P3OConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
+    return P3OConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)
