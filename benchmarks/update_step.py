@@ -13,10 +13,15 @@ calls timed interleaved, in ms per gradient step of a call:
   make every step);
 - sac_lag: one iteration's update of ``--steps`` 256-row steps (one per env step), after 2,000
   random env steps.
+- focops, cup, p3o, respo (the first-order baselines on PPO-Lag's house): as ppo_lag, at its
+  sizes (``benchmark_fields``: (64, 64) networks, 64-row minibatches, 40 epochs), so their step
+  is timed against PPO-Lag's on the same shapes (the last column; their own maths differs from
+  PPO-Lag's in the policy's loss only). Their RLlib path runs their own loss too.
 Beside them, :mod:`reference_steps`' plain-torch step on minibatches of the same shapes (its loss
 and gradients are the learner's: tests/benchmarks/test_update_step.py) and its time inside matrix
-products. Prints medians over ``--repeats`` and the ratios; one torch thread, one CPU. The two
-paths make the same update bit for bit (tests/algorithms/test_update_path.py).
+products, for the algorithms it has a step of. Prints medians over ``--repeats`` and the ratios;
+one torch thread, one CPU. PPO-Lag's and SAC-Lag's two paths make the same update bit for bit
+(tests/algorithms/test_update_path.py).
 """
 
 from __future__ import annotations
@@ -30,6 +35,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PATHS = ("rllib", "fused")
+#: The baselines timed against PPO-Lag's step (no plain-torch step of their own).
+FIRST_ORDER = ("focops", "cup", "p3o", "respo")
 
 
 def _build(algo: str, task: str, path: str, steps: int):
@@ -82,7 +89,8 @@ def _timed_reference(step, batches) -> float:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", default="SafetyPointGoal1-v0")
-    parser.add_argument("--algos", default=None, help="default: every algorithm reference_steps.py has a step of")
+    parser.add_argument("--algos", default=None, help="default: every algorithm reference_steps.py has a step of, "
+                        "then the first-order baselines")
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
@@ -90,13 +98,14 @@ def main(argv=None) -> int:
 
     from lac_rllib.tasks import get_task
 
-    args.algos = args.algos or ",".join(reference_steps.STEPS)
+    accepted = (*reference_steps.STEPS, *FIRST_ORDER)
+    args.algos = args.algos or ",".join(accepted)
     try:  # bad input, before Ray starts
         get_task(args.task)
         for name in args.algos.split(","):
-            if name not in reference_steps.STEPS:
-                raise ValueError(f"--algos {name!r}; accepted: {', '.join(reference_steps.STEPS)} (the baselines with "
-                                 "a plain-torch step; LAC's step is its chain's: benchmarks/langevin.py)")
+            if name not in accepted:
+                raise ValueError(f"--algos {name!r}; accepted: {', '.join(accepted)} (the baselines; LAC's step is "
+                                 "its chain's: benchmarks/langevin.py)")
         if args.steps < 10 or args.repeats < 1:
             raise ValueError(f"--steps {args.steps} / --repeats {args.repeats}; "
                              "accepted: --steps >= 10, --repeats >= 1")
@@ -109,28 +118,38 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     lines = ["| algorithm | RLlib's path | fused | plain torch | matmul floor | RLlib / fused | fused / plain "
-             "| fused / floor |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| fused / floor | fused / PPO-Lag's fused |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    ppo_lag_fused = None
     for name in args.algos.split(","):
+        reference = name in reference_steps.STEPS
         algos = {path: _build(name, args.task, path, args.steps) for path in PATHS}
         try:
+            warmup = reference_steps.STEPS[name].warmup_iterations(args.steps) if reference else 1
             for a in algos.values():  # warm-up: SAC-Lag's random phase, first allocations
-                for _ in range(reference_steps.STEPS[name].warmup_iterations(args.steps)):
+                for _ in range(warmup):
                     a.train()
             times = {path: [] for path in PATHS}
             plain = []
-            step, batches = _reference(name, algos["fused"], min(args.steps, 300))
+            if reference:
+                step, batches = _reference(name, algos["fused"], min(args.steps, 300))
             for _ in range(args.repeats):
                 for path, a in algos.items():
                     times[path].append(_timed_update(a))
-                plain.append(_timed_reference(step, batches))
-            floor = reference_steps.matmul_seconds(step.step, batches[:50])
+                if reference:
+                    plain.append(_timed_reference(step, batches))
+            floor = reference_steps.matmul_seconds(step.step, batches[:50]) if reference else None
         finally:
             for a in algos.values():
                 a.stop()
-        rllib, fused, ref = (1e3 * statistics.median(t) for t in (times["rllib"], times["fused"], plain))
-        floor *= 1e3
-        lines.append(f"| {name} | {rllib:.2f} | {fused:.2f} | {ref:.2f} | {floor:.2f} | {rllib / fused:.2f}x "
-                     f"| {fused / ref:.2f}x | {fused / floor:.2f}x |")
+        rllib, fused = (1e3 * statistics.median(t) for t in (times["rllib"], times["fused"]))
+        ppo_lag_fused = fused if name == "ppo_lag" else ppo_lag_fused
+        if reference:
+            ref, floor = 1e3 * statistics.median(plain), 1e3 * floor
+            own = f"{ref:.2f} | {floor:.2f} | {rllib / fused:.2f}x | {fused / ref:.2f}x | {fused / floor:.2f}x"
+        else:
+            own = f"– | – | {rllib / fused:.2f}x | – | –"
+        vs_ppo = f"{fused / ppo_lag_fused:.2f}x" if ppo_lag_fused and name in ("ppo_lag", *FIRST_ORDER) else "–"
+        lines.append(f"| {name} | {rllib:.2f} | {fused:.2f} | {own} | {vs_ppo} |")
         print(lines[-1], flush=True)
     print("\nms per gradient step (medians of", args.repeats, "interleaved repeats), one CPU, one torch thread")
     print("\n".join(lines))

@@ -18,7 +18,7 @@ from typing import Any
 from lac_rllib.algorithms.ppo_lag import config as ppo_lag
 from lac_rllib.algorithms.ppo_lag.config import OMNISAFE_BUDGET, OnPolicyParams, PPOLagConfig
 from lac_rllib.constrained import fields, metrics
-from lac_rllib.constrained.fields import INT_GE_1, POSITIVE, one_of, or_none, param
+from lac_rllib.constrained.fields import INT_GE_1, NON_NEGATIVE, POSITIVE, one_of, or_none, param
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -34,10 +34,10 @@ class P3OParams(OnPolicyParams):
     ``training(preset=...)``: "mujoco", "safety_gym" and "omnisafe" [O], "tiny" [D] (see ``PRESETS``)."""
 
     # --- P3O ---
-    kappa: float = param(20.0, accepts=POSITIVE)
+    kappa: float = param(20.0, accepts=NON_NEGATIVE)
     """κ, the weight of the exact penalty κ·ReLU(mean(r·A^C) + Ĵ_C − b) [O kappa 20]; the penalty is
     exact (its minimiser is the constrained one) once κ exceeds the optimal multiplier (Zhang et
-    al. 2022, Thm. 1)."""
+    al. 2022, Thm. 1); 0 switches the constraint off (PPO on A^R)."""
     clip_param: float = param(0.2, accepts=POSITIVE)
     """ε of PPO's clipped surrogate on A^R (RLlib's field) [O clip 0.2]; the cost surrogate is unclipped [O]."""
     num_epochs: int = param(10, accepts=INT_GE_1)
