@@ -13,10 +13,11 @@ calls timed interleaved, in ms per gradient step of a call:
   make every step);
 - sac_lag: one iteration's update of ``--steps`` 256-row steps (one per env step), after 2,000
   random env steps.
-- focops, cup, p3o, respo (the first-order baselines on PPO-Lag's house): as ppo_lag, at its
-  sizes (``benchmark_fields``: (64, 64) networks, 64-row minibatches, 40 epochs), so their step
-  is timed against PPO-Lag's on the same shapes (the last column; their own maths differs from
-  PPO-Lag's in the policy's loss only). Their RLlib path runs their own loss too.
+- the baselines built on one of those (the first-order ones on PPO-Lag's house: ``registry.house``):
+  as their house, at its sizes (``benchmark_fields``: PPO-Lag's (64, 64) networks, 64-row
+  minibatches, 40 epochs), so the last column times their step against their house's on the same
+  shapes (their maths differs from PPO-Lag's in the policy's loss only). Their RLlib path runs
+  their own loss too.
 Beside them, :mod:`reference_steps`' plain-torch step on minibatches of the same shapes (its loss
 and gradients are the learner's: tests/benchmarks/test_update_step.py) and its time inside matrix
 products, for the algorithms it has a step of. Prints medians over ``--repeats`` and the ratios;
@@ -35,8 +36,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PATHS = ("rllib", "fused")
-#: The baselines timed against PPO-Lag's step (no plain-torch step of their own).
-FIRST_ORDER = ("focops", "cup", "p3o", "respo")
 
 
 def _build(algo: str, task: str, path: str, steps: int):
@@ -96,9 +95,12 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     import reference_steps
 
+    from lac_rllib.algorithms.registry import ALGOS, house
     from lac_rllib.tasks import get_task
 
-    accepted = (*reference_steps.STEPS, *FIRST_ORDER)
+    # The baselines with a plain-torch step, then those built on one of their houses (timed against it).
+    built_on = {a: house(a) for a in ALGOS if a not in reference_steps.STEPS}
+    accepted = (*reference_steps.STEPS, *(a for a, h in built_on.items() if h in reference_steps.STEPS))
     args.algos = args.algos or ",".join(accepted)
     try:  # bad input, before Ray starts
         get_task(args.task)
@@ -118,8 +120,8 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     lines = ["| algorithm | RLlib's path | fused | plain torch | matmul floor | RLlib / fused | fused / plain "
-             "| fused / floor | fused / PPO-Lag's fused |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    ppo_lag_fused = None
+             "| fused / floor | fused / its house's fused |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    fused_ms = {}
     for name in args.algos.split(","):
         reference = name in reference_steps.STEPS
         algos = {path: _build(name, args.task, path, args.steps) for path in PATHS}
@@ -142,14 +144,15 @@ def main(argv=None) -> int:
             for a in algos.values():
                 a.stop()
         rllib, fused = (1e3 * statistics.median(t) for t in (times["rllib"], times["fused"]))
-        ppo_lag_fused = fused if name == "ppo_lag" else ppo_lag_fused
+        fused_ms[name] = fused
         if reference:
             ref, floor = 1e3 * statistics.median(plain), 1e3 * floor
             own = f"{ref:.2f} | {floor:.2f} | {rllib / fused:.2f}x | {fused / ref:.2f}x | {fused / floor:.2f}x"
         else:
             own = f"– | – | {rllib / fused:.2f}x | – | –"
-        vs_ppo = f"{fused / ppo_lag_fused:.2f}x" if ppo_lag_fused and name in ("ppo_lag", *FIRST_ORDER) else "–"
-        lines.append(f"| {name} | {rllib:.2f} | {fused:.2f} | {own} | {vs_ppo} |")
+        base = built_on.get(name)
+        vs_house = f"{fused / fused_ms[base]:.2f}x ({base})" if base in fused_ms else "–"
+        lines.append(f"| {name} | {rllib:.2f} | {fused:.2f} | {own} | {vs_house} |")
         print(lines[-1], flush=True)
     print("\nms per gradient step (medians of", args.repeats, "interleaved repeats), one CPU, one torch thread")
     print("\n".join(lines))

@@ -51,7 +51,7 @@ def field_groups(params_cls=LACParams) -> list[tuple[str, list[str]]]:
 
 def _algo_section(algo: str, first: bool) -> list[str]:
     """One algorithm's fields (grouped) and its presets. The fields every constrained algorithm has
-    (``SafeTaskParams``) are listed with the first algorithm only."""
+    (``SafeTaskParams``) are listed with the first algorithm only, unless another declares its own default."""
     from lac_rllib.algorithms.registry import DEFAULT_ALGO, algo_config
     from lac_rllib.constrained.task_config import SafeTaskParams
 
@@ -66,8 +66,10 @@ def _algo_section(algo: str, first: bool) -> list[str]:
            + (f" (with `--set algo={algo}` or `--space compare`)." if algo != DEFAULT_ALGO else ".")]
     if not first:
         out += ["Its task and observation-filter fields are those of every algorithm (first section)."]
+    base = {f.name: f.default for f in dataclasses.fields(SafeTaskParams)}
     for title, names in field_groups(params):
-        names = [n for n in names if first or n not in shared]
+        # A shared field is listed again where the algorithm declares another default (RESPO's filter).
+        names = [n for n in names if first or n not in shared or defaults[n] != base[n]]
         if not names:
             continue
         out += ["", f"### {title[:1].upper()}{title[1:]}", "", "| field | default | accepted | meaning |",

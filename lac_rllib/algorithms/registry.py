@@ -44,7 +44,9 @@ ALGOS: dict[str, str] = {
     "ppo_lag": "lac_rllib.algorithms.ppo_lag.config",
     "sac_lag": "lac_rllib.algorithms.sac_lag.config",
     "focops": "lac_rllib.algorithms.focops.config",
+    "cup": "lac_rllib.algorithms.cup.config",
     "p3o": "lac_rllib.algorithms.p3o.config",
+    "respo": "lac_rllib.algorithms.respo.config",
 }
 DEFAULT_ALGO = "lac"
 #: The name of the trial field that picks the algorithm (``--set algo=ppo_lag``, a grid over it).
@@ -150,6 +152,21 @@ def algo_config(algo: str) -> ModuleType:
 def algos_text(sep: str = " | ") -> str:
     """The algorithms' names as help texts and errors list them."""
     return sep.join(ALGOS)
+
+
+def algorithm_class(algo: str) -> type:
+    """``algo``'s RLlib Algorithm class (imports it: RLlib's modules load)."""
+    from ray.rllib.utils.serialization import deserialize_type
+
+    return deserialize_type(algo_config(algo).CONFIG_CLASS.ALGORITHM_CLASS, error=True)
+
+
+def house(algo: str) -> str | None:
+    """The package's algorithm that ``algo`` is built on: the nearest one whose algorithm class
+    ``algo``'s extends (the first-order baselines: ``ppo_lag``, whose folder they import); None if
+    it extends none. Benchmarks time an algorithm against its house's step."""
+    classes = {algorithm_class(a): a for a in ALGOS if a != algo}
+    return next((classes[c] for c in algorithm_class(algo).__mro__[1:] if c in classes), None)
 
 
 def budget_fields(algo: str, budget: str, preset: str) -> dict:

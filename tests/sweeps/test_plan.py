@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from lac_rllib.algorithms.registry import algos_text
+from lac_rllib.algorithms.registry import ALGOS, algos_text
 from sweeps import run as cli
 
 README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
@@ -105,12 +105,12 @@ def test_trial_fields_are_resolved_once_in_order(tmp_path, monkeypatch):
 
 def test_the_compare_space_runs_every_algorithm_at_one_budget(tmp_path, monkeypatch):
     plan = _plan(tmp_path, monkeypatch, "--space", "compare")
-    assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 9)
-    assert [t.algo for t in plan.trials] == ["lac"] * 3 + ["ppo_lag"] * 3 + ["sac_lag"] * 3
+    n = len(ALGOS)  # every algorithm of the package, LAC first
+    assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 3 * n)
+    assert [t.algo for t in plan.trials] == [a for a in ALGOS for _ in range(3)] and plan.trials[0].algo == "lac"
     assert [t.params["algo"] for t in plan.trials] == [t.algo for t in plan.trials]
-    assert [t.default for t in plan.trials] == [True] * 3 + [False] * 6  # LAC's defaults: the reference
-    assert {t.config_label() for t in plan.trials} == {f"compare-algo={a}-PointHazard-v0" for a in
-                                                       ("lac", "ppo_lag", "sac_lag")}
+    assert [t.default for t in plan.trials] == [True] * 3 + [False] * (3 * n - 3)  # LAC's defaults: the reference
+    assert {t.config_label() for t in plan.trials} == {f"compare-algo={a}-PointHazard-v0" for a in ALGOS}
     assert "langevin_steps" not in plan.trials[3].params and "langevin_steps" in plan.trials[0].params
     assert plan.estimated_wall_s / 60 <= 35
 

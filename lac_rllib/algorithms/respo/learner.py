@@ -1,0 +1,159 @@
+"""RESPOTorchLearner: PPO-Lag's learner with RESPO's policy loss, its reach critic and ν's step.
+Source tag: [G] Ganai et al.'s respo.py (``compute_loss_pi``, ``compute_loss_v``, ``update``).
+
+One iteration (one ``learner_group.update``), with ψ(s) = 1 − V_p(s) from V_p at collection
+(reachability.py) and b = ``multiplier_cost_limit`` (None: the run's cost limit; [G]: 0):
+
+1. ν = softplus(p) takes one Adam step on the loss −p·(J_C − b)·mean_batch(ψ) [G update:
+   ``loss_penalty = -penalty_param*cost_dev``], J_C the mean cost of this iteration's completed
+   episodes. RLlib calls ``before_gradient_based_update`` before the learner connector has built
+   the batch, so J_C is taken there and the step at the first loss call of the update, before any
+   gradient step: once per iteration;
+2. each minibatch, with r = π(a|s)/π_old(a|s), A^R standardised and A^C centred (cost_gae.py):
+
+       L_π = −[ min(r·A^R·ψ, clip(r, 1 ± ε)·A^R·ψ) − r·A^C·(ν·ψ + (1 − ψ)) ] / (1 + ν)
+
+   averaged over the real rows [G compute_loss_pi: loss_rpi − loss_cpi, over 1 + penalty], plus
+   the MSE of V_R, V_C (PPO-Lag's) and V_p against its targets p_t [G compute_loss_v], each network
+   with its own Adam; V_p's at ``reach_critic_lr`` with no L2 [G pvf_optimizer];
+3. PPO-Lag's KL stop: before each epoch, on the whole batch [G: before each of its 80 steps]; the
+   critics take every epoch's steps (``kl_stop_critics=False`` [G]).
+
+Every lr, ν's included, decays linearly to 0 with the policy's (``decay_every_lr`` [G LinearLR on
+all five optimizers]): ν's is lagrangian_lr times the policy's current lr over its initial one.
+"""
+
+from __future__ import annotations
+
+import torch
+from ray.rllib.core.columns import Columns
+from ray.rllib.evaluation.postprocessing import Postprocessing
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
+from lac_rllib.algorithms.ppo_lag.learner import COST_CRITIC, CRITIC, POLICY, PPOLagTorchLearner
+from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, ReachTargets
+from lac_rllib.constrained.lagrange import LagrangeMultiplier
+from lac_rllib.constrained.metrics import NU, REACH_PROB_MEAN, REACH_VF_LOSS
+from lac_rllib.constrained.optim import ForeachAdam
+
+REACH_CRITIC = "reach_critic"  # the 4th optimizer's name
+
+
+class ReachWeightedMultiplier(LagrangeMultiplier):
+    """ν of RESPO. ``step(J_C)``, PPO-Lag's call before the update, only records J_C;
+    ``step_weighted(ψ̄)`` then makes the rule's step on the error (J_C − b)·ψ̄ [G cost_deviation],
+    ψ̄ = mean(1 − V_p) over the batch, and projects as :class:`LagrangeMultiplier` does."""
+
+    pending: float | None = None
+
+    def step(self, episode_cost: float | None) -> float:
+        self.pending = episode_cost
+        return self.value
+
+    def step_weighted(self, safe_fraction: float) -> float:
+        j_c, self.pending = self.pending, None
+        if j_c is None:  # no episode completed this iteration: no step
+            return self.value
+        nu = max(0.0, self.rule.step(self.value, (j_c - self.cost_limit) * safe_fraction, 0.0))
+        upper = self.upper
+        self._value.fill_(min(nu, upper) if upper is not None else nu)
+        return self.value
+
+
+def set_rule_lr(rule, lr: float) -> None:
+    """The learning rate of a step rule: PPO-Lag's AdamStep and GradientStep have ``lr``, its
+    SoftplusAdamStep an ``adam`` that has."""
+    getattr(rule, "adam", rule).lr = float(lr)
+
+
+class RESPOTorchLearner(PPOLagTorchLearner):
+    RLLIB_LOSS = False
+    MINIBATCH_COLUMNS = (*PPOLagTorchLearner.MINIBATCH_COLUMNS, REACH_PROBS, REACH_TARGETS)
+
+    @override(PPOLagTorchLearner)
+    def build(self) -> None:
+        super().build()
+        self.reachability = ReachTargets(gamma=self.config.reach_gamma)
+        if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
+            self._learner_connector.append(self.reachability)  # after CostGAE: the phantom rows' costs are 0
+        self.nu_due: set[str] = set()
+
+    @override(PPOLagTorchLearner)
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
+        """PPO-Lag's rule and bound (softplus-Adam by default [G]), on the weighted error and b."""
+        base, config = super().make_multiplier(module_id, module), self.config.get_config_for_module(module_id)
+        return ReachWeightedMultiplier(module.unwrapped().nu, cost_limit=config.multiplier_limit, rule=base.rule,
+                                       bound=base.bound, bounded=base.bounded)
+
+    @override(PPOLagTorchLearner)
+    def configure_optimizers_for_module(self, module_id, config=None) -> None:
+        module = self.module[module_id].unwrapped()
+        networks = {
+            POLICY: ([module.encoder.actor_encoder, module.pi], config.policy_lr_or_schedule()),
+            CRITIC: ([module.encoder.critic_encoder, module.vf], config.lr_or_schedule(config.critic_lr)),
+            COST_CRITIC: ([module.cost_vf], config.lr_or_schedule(config.critic_lr)),
+            REACH_CRITIC: ([module.reach_vf], config.lr_or_schedule(config.reach_critic_lr)),
+        }
+        adam = ForeachAdam if config.update_path == "fused" else torch.optim.Adam  # the same steps
+        for name, (parts, lr) in networks.items():
+            params = [p for part in parts for p in self.get_parameters(part)]
+            self.register_optimizer(module_id=module_id, optimizer_name=name, optimizer=adam(params),
+                                    params=params, lr_or_lr_schedule=lr)
+
+    # ----- ν: J_C before the update, its step at the update's first loss call -----
+    @override(PPOLagTorchLearner)
+    def before_gradient_based_update(self, *, timesteps) -> None:
+        super().before_gradient_based_update(timesteps=timesteps)  # records J_C in each multiplier
+        self.nu_due = set(self.multipliers)
+
+    @override(PPOLagTorchLearner)
+    def compute_loss_for_module(self, *, module_id, config, batch, fwd_out) -> torch.Tensor:
+        if module_id in self.nu_due:  # the update's first minibatch: before any gradient step
+            self.nu_due.discard(module_id)
+            self.step_nu(module_id, config)
+        return super().compute_loss_for_module(module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+
+    def step_nu(self, module_id, config) -> None:
+        """ν's one step of the iteration on (J_C − b)·mean(1 − V_p) [G update], at the decayed lr."""
+        multiplier = self.multipliers[module_id]
+        decay = 1.0
+        if config.decay_every_lr and config.policy_lr_schedule == "linear":
+            decay = self._get_optimizer_lr(self.get_optimizer(module_id, POLICY)) / config.lr
+        set_rule_lr(multiplier.rule, config.lagrangian_lr * decay)
+        safe = self.reachability.safe_fraction[module_id]
+        multiplier.step_weighted(safe)
+        self.metrics.log_dict({NU: multiplier.value, REACH_PROB_MEAN: 1.0 - safe}, key=module_id, window=1)
+
+    # ----- losses -----
+    @override(PPOLagTorchLearner)
+    def policy_advantages(self, config, module, batch) -> torch.Tensor:
+        """A^R alone: the loss weighs it and A^C itself (:meth:`policy_loss`)."""
+        return batch[Postprocessing.ADVANTAGES]
+
+    @override(PPOLagTorchLearner)
+    def policy_loss(self, module_id, config, module, batch, logits, logp, advantages, masked_mean):
+        """L_π per row (the module docstring) [G compute_loss_pi]."""
+        nu = module.nu.detach()
+        psi = 1.0 - batch[REACH_PROBS]  # ψ = 1 − V_p(s), at collection
+        ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
+        clipped = torch.clamp(ratio, 1 - config.clip_param, 1 + config.clip_param)
+        reward = torch.min(ratio * advantages * psi, clipped * advantages * psi)  # [G loss_rpi]
+        cost = ratio * batch[COST_ADVANTAGES] * (nu * psi + (1.0 - psi))  # [G loss_cpi], unclipped
+        return -(reward - cost) / (1.0 + nu), None
+
+    @override(PPOLagTorchLearner)
+    def fused_loss(self, module_id, config, module, batch, fwd_out, advantages) -> torch.Tensor:
+        """PPO-Lag's loss (the policy's above, V_R's and V_C's MSE) plus V_p's MSE [G compute_loss_v]."""
+        loss = super().fused_loss(module_id, config, module, batch, fwd_out, advantages)
+        mask = batch[Columns.LOSS_MASK]
+        reach_loss = ((module.compute_reach_probs(batch) - batch[REACH_TARGETS]) ** 2)[mask].mean()
+        if self.reports_minibatch:
+            self.metrics.log_value((module_id, REACH_VF_LOSS), reach_loss.detach(), window=1)
+        return loss + reach_loss
+
+    @override(PPOLagTorchLearner)
+    def stopped_optimizers(self, module_id) -> tuple[str, ...]:
+        """The reach critic stops with the other critics (``kl_stop_critics``)."""
+        stopped = super().stopped_optimizers(module_id)
+        return (*stopped, REACH_CRITIC) if CRITIC in stopped else stopped

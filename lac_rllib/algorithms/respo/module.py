@@ -1,0 +1,39 @@
+"""RESPOTorchRLModule: PPO-Lag's module (π, V_R, V_C, ν) plus the reach critic V_p.
+
+``reach_vf`` is V_p(s) ∈ (0, 1), the estimated (discounted) probability that the policy reaches a
+state of positive cost from s: an MLP of the other critics' shape with a sigmoid head [G
+core_respo.py: ``self.vp = MLPCritic(..., nn.Sigmoid)``]. Like the other critics it is a
+non-inference attribute: it exists on the learner only, not on the env runners.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from ray.rllib.core.columns import Columns
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.algorithms.ppo_lag.module import CostCritic, PPOLagTorchRLModule
+
+
+class ReachCritic(CostCritic):
+    """V_p(s): V_C's MLP and linear head, then a sigmoid [G]."""
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return torch.sigmoid(super().forward(obs))
+
+
+class RESPOTorchRLModule(PPOLagTorchRLModule):
+    @override(PPOLagTorchRLModule)
+    def setup(self):
+        super().setup()
+        self.reach_vf = ReachCritic(self.catalog)  # deleted again on env runners (inference-only)
+
+    def compute_reach_probs(self, batch: dict[str, Any]) -> torch.Tensor:
+        """V_p(s) of every row of ``batch`` (B,)."""
+        return self.reach_vf(batch[Columns.OBS])
+
+    @override(PPOLagTorchRLModule)
+    def get_non_inference_attributes(self) -> list[str]:
+        return [*super().get_non_inference_attributes(), "reach_vf"]
