@@ -84,6 +84,34 @@ def best_configuration(summary: pd.DataFrame) -> dict | None:
     return {k: (None if _is_na(v) else v) for k, v in plain.items()}
 
 
+#: The metrics a sweep's parent run gets when it ends (MLflow's runs table sorts and charts sweeps by them).
+PARENT_METRICS = ("best_feasible_return", "best_feasible_cost", "feasible_configurations", "configurations",
+                  "trials_finished", "trials_stopped", "trials_failed")
+
+
+def parent_metrics(summary: pd.DataFrame) -> dict[str, float]:
+    """The parent run's metrics (:data:`PARENT_METRICS`) from the sweep's summary: the best
+    mean-feasible configuration's return and cost (left out when none is feasible, so a sweep
+    without one sorts last rather than at a made-up number), how many configurations are
+    feasible, and the trials finished, stopped early and failed. A sweep over several tasks gets
+    the best per task instead (``best_feasible_return/<task>``): returns of different tasks do
+    not compare."""
+    out = {"feasible_configurations": float(summary["mean_feasible"].astype(bool).sum()),
+           "configurations": float(len(summary)),
+           "trials_finished": float(summary["n_seeds"].sum()),
+           "trials_stopped": float(summary["n_stopped"].sum()),
+           "trials_failed": float(summary["n_failed"].sum())}
+    tasks = list(dict.fromkeys(summary["task"]))
+    for task in tasks:
+        best = best_configuration(summary[summary["task"] == task])
+        if best is None:
+            continue
+        suffix = "" if len(tasks) == 1 else f"/{task}"
+        out[f"best_feasible_return{suffix}"] = float(best["return_mean"])
+        out[f"best_feasible_cost{suffix}"] = float(best["cost_mean"])
+    return out
+
+
 def _describe(cfg: dict) -> str:
     what = f"{cfg['group']} {cfg['param']}={_fmt_value(cfg['value'])}" if cfg["param"] else cfg["group"]
     return (f"{what} on {cfg['task']}: return {_pm(cfg['return_mean'], cfg['return_std'])}, cost "

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -81,7 +82,9 @@ def varied(trials: pd.DataFrame, fields: tuple[str, ...]) -> list[str]:
 
 def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str, plan=None) -> None:
     """The report on the parent run (``summary/``) and the note that leads it; the parent closed."""
-    from sweeps.report import algorithm_comparison, note_markdown, summarize, write_sweep_reports
+    from mlflow.entities import Metric
+
+    from sweeps.report import algorithm_comparison, note_markdown, parent_metrics, summarize, write_sweep_reports
 
     fields = swept_fields(plan) if plan is not None else ()
     trials, curves = sweep_results(tracker, parent, fields)
@@ -104,6 +107,9 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
             comparison = algorithm_comparison(summary)
             if comparison:  # the algorithms side by side lead the note (MLflow cuts a tag at 8000 characters)
                 note = note.replace(heading, heading + "\n\n" + comparison, 1)[:7990]
+            # The runs table sorts and charts sweeps by these (docs/sweeps.md, "The parent run").
+            tracker.client.log_batch(parent, metrics=[Metric(k, v, int(time.time() * 1000), 0)
+                                                      for k, v in parent_metrics(summary).items()])
     tracker.set_note(parent, note)
     tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
     tracker.client.set_tag(parent, STATUS_TAG, "finished")

@@ -181,3 +181,21 @@ def test_a_compare_sweep_puts_every_algorithm_beside_lac():
     assert "**Best within the limit:** lac, return 12.00" in text
     assert "| lac | 3 |" in text and "– | – |" in text.split("| lac |")[1].splitlines()[0]
     assert report.algorithm_comparison(report.summarize(hand_table())) == ""  # no algorithms compared
+
+
+def test_the_parent_runs_metrics_name_the_best_feasible_configuration_and_the_counts():
+    summary = report.summarize(hand_table())  # VT 10: feasible? mean cost 24 <= 25; VT 20 infeasible; VT 30 feasible
+    m = report.parent_metrics(summary)
+    assert set(m) == set(report.PARENT_METRICS)
+    assert m["best_feasible_return"] == pytest.approx(20.0) and m["best_feasible_cost"] == pytest.approx(10.0)
+    assert m["feasible_configurations"] == 3 and m["configurations"] == 5  # VT 10, 30 and NI 50 within 25
+    assert (m["trials_finished"], m["trials_failed"], m["trials_stopped"]) == (7, 4, 0)
+    # Nothing feasible: no best (the sweep sorts last), the counts still there.
+    none = report.parent_metrics(report.summarize(hand_table(limit=0.5)))
+    assert "best_feasible_return" not in none and none["feasible_configurations"] == 0
+    # Two tasks: the best per task, not one across tasks.
+    two = pd.concat([hand_table(), hand_table().assign(task="CarGoal1", episode_return=lambda d: d.episode_return * 2)],
+                    ignore_index=True)
+    per_task = report.parent_metrics(report.summarize(two))
+    assert per_task["best_feasible_return/PointGoal1"] == pytest.approx(20.0)
+    assert per_task["best_feasible_return/CarGoal1"] == pytest.approx(40.0) and "best_feasible_return" not in per_task
