@@ -26,6 +26,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.text import Text  # noqa: E402
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
@@ -129,6 +130,7 @@ def frontier_png(summary: pd.DataFrame, path) -> str | None:
     colours = _colours(df)
     tasks = list(dict.fromkeys(df["task"].astype(str)))
     fig, axes = plt.subplots(1, len(tasks), figsize=(6.4 * len(tasks), 5.2), squeeze=False)
+    labels = []  # (axis, its labelled points)
     for ax, task in zip(axes[0], tasks):
         g = df[df["task"].astype(str) == task]
         cost, ret = g["cost_mean"].to_numpy(float), g["return_mean"].to_numpy(float)
@@ -166,15 +168,49 @@ def frontier_png(summary: pd.DataFrame, path) -> str | None:
             ax.axvline(limit, ls="--", color="tab:red", label=f"cost limit ({limit:g})")
         show = np.ones(len(g), bool) if len(g) <= LABEL_ALL_UP_TO else (on | default | (g["algo_"] != LAC).to_numpy())
         ax.margins(x=0.25, y=0.08)  # room for the labels of the right-most points
-        for x, y, text in zip(cost[show], ret[show], g["label_"].to_numpy()[show]):
-            ax.annotate(text, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=7)
+        labels.append((ax, list(zip(cost[show], ret[show], g["label_"].to_numpy()[show]))))
         ax.set(title=f"{task}: final return vs cost (mean, 95% CI)" if task else "final return vs cost (mean, 95% CI)",
                xlabel="final episode cost", ylabel="final episode return")
         ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
+    for ax, points in labels:  # after the layout: the labels are placed where they will be drawn
+        place_labels(ax, points)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return str(path)
+
+
+def place_labels(ax, points: list[tuple[float, float, str]], fontsize: int = 7) -> list:
+    """Annotate each (x, y, text) beside its point, no two labels overlapping: each label starts at
+    (5, 4) points from its point; going up the plot, a label whose text would overlap one already
+    placed beside it (their x-ranges meet) moves up just past it, with a thin leader to its point.
+    The labels keep their points' vertical order, so leaders do not cross. Configurations with the
+    same mean (an ablation's NI and PR rows at one return) would otherwise print over each other."""
+    renderer = ax.figure.canvas.get_renderer()
+    to_points = 72.0 / ax.figure.dpi
+    boxes = []
+    for x, y, text in points:  # where each label would be at (5, 4): its text's box in display pixels
+        trial = ax.annotate(text, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=fontsize)
+        boxes.append(label_box(trial, renderer))
+        trial.remove()
+    placed, annotations = [], {}  # placed: (x0, x1, top) of the labels so far
+    for i in sorted(range(len(points)), key=lambda i: (boxes[i].y0, boxes[i].x0)):
+        box, gap = boxes[i], 1.0  # pixels between two labels
+        bottom = max([box.y0, *(top + gap for x0, x1, top in placed if x0 < box.x1 and box.x0 < x1)])
+        x, y, text = points[i]
+        moved = bottom > box.y0
+        annotations[i] = ax.annotate(text, (x, y), textcoords="offset points", fontsize=fontsize,
+                                     xytext=(5, 4 + (bottom - box.y0) * to_points),
+                                     arrowprops=dict(arrowstyle="-", lw=0.4, color="0.5") if moved else None)
+        placed.append((box.x0, box.x1, bottom + box.height))
+    return [annotations[i] for i in range(len(points))]
+
+
+def label_box(annotation, renderer):
+    """The display box of an annotation's text alone (an Annotation's own extent includes its
+    leader, which starts at the point every label of that point shares)."""
+    annotation.update_positions(renderer)  # where the text goes, from its point and offset
+    return Text.get_window_extent(annotation, renderer)
 
 
 def _hover(r: dict) -> str:

@@ -98,3 +98,21 @@ def test_frontier_html_embeds_plotly_and_names_configurations(tmp_path):
     assert "plotly" in html and 'src="https://cdn.plot.ly' not in html  # plotly.js embedded: MLflow is offline
     for text in ("langevin_steps=10", "langevin_steps=80", "algo=ppo_lag", "default configuration", "on the frontier"):
         assert text in html, text
+
+
+def test_labels_of_points_at_the_same_place_do_not_overlap():
+    """docs/sweeps-default/frontier.png printed 'NI langevin_steps=20' over 'PR beta=0.5' (both at
+    return −5.1): every label now gets its own place, the first beside its point."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.scatter([0.0, 0.0, 0.0, 0.3], [-5.1, -5.1, -5.1, -5.0])
+    points = [(0.0, -5.1, "NI langevin_steps=20"), (0.0, -5.1, "PR beta=0.5"), (0.0, -5.1, "VT langevin_steps=10"),
+              (0.3, -5.0, "default configuration")]
+    annotations = frontier.place_labels(ax, points)
+    renderer = fig.canvas.get_renderer()
+    boxes = [frontier.label_box(a, renderer) for a in annotations]
+    assert sorted(a.get_text() for a in annotations) == sorted(p[2] for p in points)
+    assert not any(boxes[i].overlaps(boxes[j]) for i in range(len(boxes)) for j in range(i))
+    assert annotations[0].get_text() == "default configuration" and annotations[0].xyann == (5, 4)  # free: unmoved
+    plt.close(fig)
