@@ -61,6 +61,10 @@ class RESPOParams(OnPolicyLagParams):
     reach_critic_lr: float = param(1e-4, accepts=POSITIVE)
     """Adam learning rate of the reach critic V_p at the start [G pvf_lr 1e-4]; it decays with the
     others (decay_every_lr). No L2 on it [G]."""
+    reach_weighted: bool = param(True, accepts=BOOL)
+    """The policy's loss weighs its surrogates by V_p at collection (ψ = 1 − V_p: reward term ·ψ,
+    cost term ·(ν·ψ + 1 − ψ)) [G]; False: ψ ≡ 1, PPO-Lag's loss on A^R − ν·A^C over 1 + ν. With ν
+    pinned at 0 too, the constraint is off (V_p's weight keeps the cost term alive at ν = 0)."""
     decay_every_lr: bool = param(True, accepts=BOOL)
     """The three critics' and ν's learning rates decay linearly to 0 with the policy's
     (policy_lr_schedule, over lr_decay_horizon) [G: a LinearLR on each of its five optimizers];

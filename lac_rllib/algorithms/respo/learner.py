@@ -135,7 +135,7 @@ class RESPOTorchLearner(PPOLagTorchLearner):
     def policy_loss(self, module_id, config, module, batch, logits, logp, advantages, masked_mean):
         """L_π per row (the module docstring) [G compute_loss_pi]."""
         nu = module.nu.detach()
-        psi = 1.0 - batch[REACH_PROBS]  # ψ = 1 − V_p(s), at collection
+        psi = 1.0 - batch[REACH_PROBS] if config.reach_weighted else 1.0  # ψ = 1 − V_p(s), at collection
         ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
         clipped = torch.clamp(ratio, 1 - config.clip_param, 1 + config.clip_param)
         reward = torch.min(ratio * advantages * psi, clipped * advantages * psi)  # [G loss_rpi]

@@ -134,6 +134,13 @@ def test_the_policy_loss_by_hand():
     assert term is None
     np.testing.assert_allclose(per_row.detach().numpy(), expected, rtol=1e-6, atol=1e-6)
     assert float(per_row.mean()) == pytest.approx(float(np.mean(expected)), abs=1e-6)
+    # reach_weighted=False: ψ ≡ 1, PPO-Lag's loss on A^R − ν·A^C over 1 + ν (V_p no longer matters).
+    config.reach_weighted = False
+    flat, _ = lrn.policy_loss(DEFAULT_MODULE_ID, config, module, batch, None, logp_old + torch.log(r), advantages,
+                              torch.mean)
+    unweighted = [-(min(r * a_r, min(max(r, 1 - eps), 1 + eps) * a_r) - r * a_c * nu) / (1 + nu)
+                  for r, a_r, a_c, _ in rows]
+    np.testing.assert_allclose(flat.detach().numpy(), unweighted, rtol=1e-6, atol=1e-6)
 
 
 # ----- ν's step -----
