@@ -85,28 +85,36 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     from mlflow.entities import Metric
 
     from sweeps.report import algorithm_comparison, note_markdown, parent_metrics, summarize, write_sweep_reports
+    from sweeps.table import table_markdown, write_table_report
 
     fields = swept_fields(plan) if plan is not None else ()
     trials, curves = sweep_results(tracker, parent, fields)
     note = heading
+    budget_steps = plan.timesteps if plan is not None else None
     with tempfile.TemporaryDirectory() as tmp:
         if len(trials):
             write_sweep_reports(trials, curves, tmp, fields=tuple(varied(trials, fields)))
+            if budget_steps:  # a sweep over tasks x algorithms: the paper's layout (None otherwise)
+                write_table_report(trials, tmp, budget_steps, budget_note(plan))
             pareto = pareto_set(plan) if plan is not None and plan.sweep.multi_objective else None
             if pareto is not None:
                 (Path(tmp) / "pareto.json").write_text(json.dumps(pareto, indent=2, default=str))
         tracker.client.log_artifacts(parent, tmp, "summary")
         if len(trials):
             summary = summarize(trials)
-            footer = ("Files: `summary/summary.md` (every column), `summary/frontier.html` (the reward-cost "
+            footer = ("Files: `summary/summary.md` (every column), `summary/table.md` and `table.html` (a sweep over "
+                      "tasks x algorithms, in the paper's layout), `summary/frontier.html` (the reward-cost "
                       "frontier, interactive), `summary/importance.png`, `summary/aggregates.png`, "
                       "`summary/learning_curves.png`; one child run per trial (group them by the tag `lac.config` "
                       "in the runs table to see one averaged curve per configuration).")
             note = note_markdown(summary, heading, footer, extra=note_extras(summary, trials, curves, fields, plan,
                                                                                pareto))
-            comparison = algorithm_comparison(summary)
-            if comparison:  # the algorithms side by side lead the note (MLflow cuts a tag at 8000 characters)
-                note = note.replace(heading, heading + "\n\n" + comparison, 1)[:7990]
+            # The algorithms side by side lead the note: the table in the paper's layout where the
+            # sweep is one, else the comparison with LAC (MLflow cuts a tag at 8000 characters).
+            lead = (table_markdown(trials, budget_steps, budget_note(plan), limit=5000) if budget_steps else ""
+                    ) or algorithm_comparison(summary)
+            if lead:
+                note = note.replace(heading, heading + "\n\n" + lead, 1)[:7990]
             # The runs table sorts and charts sweeps by these (docs/sweeps.md, "The parent run").
             tracker.client.log_batch(parent, metrics=[Metric(k, v, int(time.time() * 1000), 0)
                                                       for k, v in parent_metrics(summary).items()])
@@ -114,6 +122,14 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
     tracker.client.set_tag(parent, STATUS_TAG, "finished")
     tracker.client.set_terminated(parent, status="FINISHED")
+
+
+def budget_note(plan) -> str:
+    """What the table says of a named budget beside its env steps (a number of steps: nothing)."""
+    from sweeps.spaces import BUDGETS
+
+    budget = BUDGETS.get(plan.budget)
+    return f"{plan.budget}: {budget.doc}" if budget is not None and plan.budget != "paper" else ""
 
 
 def swept_fields(plan) -> tuple[str, ...]:

@@ -643,9 +643,12 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
     groups += [(("groups_at", i, "groups", g), grp) for i, at in enumerate(sweep.groups_at)
                for g, grp in at.groups.items()]
     # Each group's algorithms, checked where they are named (its grid, else its set).
-    group_algos = [_algos_of(top_algos, group.set, group.grid,
-                             _grid_loc(where) if ALGO_FIELD in group.grid else _set_loc(where), search_dirs)
-                   for where, group in groups]
+    try:
+        group_algos = [_algos_of(top_algos, group.set, group.grid,
+                                 _grid_loc(where) if ALGO_FIELD in group.grid else _set_loc(where), search_dirs)
+                       for where, group in groups]
+    except FieldError as e:
+        raise FieldError(e.loc, e.message + _missing_algos_hint(groups, search_dirs)) from None
     # The sweep's set reaches every trial: each algorithm any group runs must have its fields.
     _check_set(sweep.set, tuple(dict.fromkeys(a for algos in group_algos for a in algos)) or top_algos, ("set",))
     for (where, group), algos in zip(groups, group_algos):
@@ -658,6 +661,23 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
             if name != ALGO_FIELD:
                 for i, value in enumerate(values):
                     _check_field(name, value, algos, (*prefix, name, i))
+
+
+def _missing_algos_hint(groups: list, search_dirs: tuple[str, ...]) -> str:
+    """The tail of a refused algorithm's error: every algorithm the groups name that this install
+    lacks (a built-in file such as table2.yaml names baselines before they land), and how to run
+    the others meanwhile."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD, check_algo
+
+    named = [a for _, g in groups for a in (g.grid.get(ALGO_FIELD) or [g.set.get(ALGO_FIELD)]) if a is not None]
+    missing = []
+    for algo in dict.fromkeys(named):
+        try:
+            check_algo(algo, search_dirs)
+        except ValueError:
+            missing.append(str(algo))
+    return (f"; this file names {len(missing)} algorithm(s) not available here ({', '.join(missing)}): run the "
+            "others from a copy of it without them (--config COPY.yaml)")
 
 
 def _grid_loc(where: tuple) -> tuple:

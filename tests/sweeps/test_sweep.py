@@ -605,3 +605,26 @@ def test_a_users_own_algorithm_runs_through_the_sweep_mlflow_the_report_and_lac_
     result = json.loads(out.strip().splitlines()[-1])
     assert rc == 0 and (result["algo"], result["episodes"], len(result["returns"])) == (toy, 3, 3), out
     assert toy in sys.modules and "eval/generator/return_mean" in client.get_run(child.info.run_id).data.metrics
+
+
+@pytest.mark.slow
+def test_a_smoke_table_sweep_writes_the_table_and_the_parents_metrics(ray_session, tmp_path):
+    """2 tasks x 2 algorithms x 1 seed: the parent run gets summary/table.md (rows the tasks,
+    columns the algorithms, the budget said) leading its note, and its metrics (issue 35)."""
+    sweep = tmp_path / "table.yaml"
+    sweep.write_text("task: [lac/PointHazard-v0, lac/CostProbe-v0]\nbudget: smoke\nseeds: 1\n"
+                     "groups:\n  compare: {grid: {algo: [ppo_lag, focops]}}\n")
+    args = cli.parse_args(["--config", str(sweep), "--max-concurrent", "2",
+                           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                           "--storage", str(tmp_path / "ray_results"), "--experiment", "test"])
+    assert _sweep(tmp_path, args) == 0
+    client, parents, children = _runs(tmp_path)
+    assert len(parents) == 1 and len(children) == 4
+    parent = client.get_run(parents[0].info.run_id)
+    table = Path(client.download_artifacts(parent.info.run_id, "summary/table.md", str(tmp_path))).read_text()
+    assert "`lac/PointHazard-v0`" in table and "`lac/CostProbe-v0`" in table and "Budget: 2,000 env steps" in table
+    header = next(line for line in table.splitlines() if line.startswith("| task (limit)"))
+    assert "PPO-L" in header and "FOCOPS" in header  # the paper's names of ppo_lag and focops as columns
+    assert "Final return and cost per task and algorithm" in parent.data.tags["mlflow.note.content"]
+    m = parent.data.metrics
+    assert m["trials_finished"] + m["trials_failed"] == 4 and m["configurations"] == 4, m

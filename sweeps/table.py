@@ -1,0 +1,599 @@
+"""The paper's tables from a sweep: tasks × algorithms, each cell beside the published figures.
+
+A sweep over several algorithms (``--space table1``, ``table2``, ``compare``, or any sweep whose
+trials run two or more ``algo``) gets, in its parent run's ``summary/``, a table in the layout of
+the paper's Tables 1 and 2: a block of rows per task, a column per algorithm (``table.md``,
+``table.html`` with the intervals on hover, ``table.png``).
+
+Conventions:
+- A cell is one (task, algorithm): the final return and cost of its trials, mean ± std over seeds
+  (ddof=1) and the 95% bootstrap interval of the mean (sweeps/stats.py). Failed trials and trials
+  a scheduler stopped early are counted, not averaged (as in summary.md).
+- **Bold**: a feasible cell, mean cost ≤ the limit (the trials' ``cost_limit``), as the paper bolds.
+- ★: the best feasible algorithm of the task, the highest mean return among its feasible cells
+  (the paper's blue); ties at the printed precision (2 decimals) are all marked.
+- Below the cells, the same algorithm on the same task as published (sweeps/published.yaml): the
+  paper's figure (Table 1 or 2) and, on Safety-Gymnasium's tasks, OmniSafe's; blank where a source
+  has none. Each at its source's env steps, said beside it.
+- The table states the sweep's budget (env steps per trial) and, when it is not the published
+  figures' budget, says so: a quick-budget table is a machinery check, not the paper's result.
+- No table (None, ""): fewer than two algorithms in the trials (an ablation, a search), or an
+  algorithm that ran more than one configuration on a task (a cell would average different
+  configurations; summary.md keeps them apart).
+
+The published figures are data, checked by :class:`Published` when read: each has a source (with
+its URL, simulator, env steps and per-task limit), our task id and algorithm name, and [mean, std]
+of return and cost as the source prints them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import html
+import math
+from pathlib import Path
+from typing import Annotated, Literal
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+import yaml  # noqa: E402
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator  # noqa: E402
+
+from lac_rllib.algorithms.registry import DEFAULT_ALGO  # noqa: E402
+from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN  # noqa: E402
+from sweeps.bounded_yaml import YamlRefused  # noqa: E402
+from sweeps.bounded_yaml import read as read_yaml  # noqa: E402
+from sweeps.bounded_yaml import read_text as read_yaml_text  # noqa: E402
+from sweeps.configurations import fmt_num, is_na, prepared  # noqa: E402
+from sweeps.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
+from sweeps.sweep_file import MAX_BUDGET, Int, KeyedError, Origin, Real, SafeName  # noqa: E402
+
+PUBLISHED_FILE = Path(__file__).with_name("published.yaml")
+#: The rows of published figures under each task (a source's ``row``) and their labels, in print order.
+ROWS = {"paper": "paper", "omnisafe": "OmniSafe"}
+BEST_MARK = "★"
+BEST_COLOUR = "#1f4fd1"  # the paper's blue
+
+
+# ----------------------------------------------------------------------------- the published figures
+
+
+class PublishedError(ValueError):
+    """A bad published-figures file: ``FILE:LINE: key.path: what is wrong`` (one line)."""
+
+
+def _schema() -> ConfigDict:
+    return ConfigDict(extra="forbid", use_attribute_docstrings=True, populate_by_name=True)
+
+
+Std = Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)]
+Text = Annotated[str, Field(min_length=1, max_length=400)]
+
+
+class SourceTask(BaseModel):
+    """A task as a source names it, and the limit its figures are under."""
+
+    model_config = _schema()
+    name: Text
+    """The source's name of the task (the paper's "PointGoal", "Ant-v3")."""
+    cost_limit: Real = Field(ge=0)
+    """The limit of the source's runs on it (as printed)."""
+
+
+class Source(BaseModel):
+    """Where figures were published: one table of one paper or benchmark."""
+
+    model_config = _schema()
+    title: Text
+    """The table, e.g. "OmniSafe's on-policy benchmark on Safety-Gymnasium, Table 2"."""
+    url: str = Field(pattern=r"^https://\S+$", max_length=400)
+    """Where to read it (a repository at a commit where there is one)."""
+    row: Literal["paper", "omnisafe"]
+    """Which row under each task its figures print in (:data:`ROWS`)."""
+    simulator: Text
+    """What its runs ran on: a figure only compares with a run on the same."""
+    steps: Int(1, MAX_BUDGET)
+    """Env steps per run behind its figures (a figure may say another)."""
+    seeds: Text | None = None
+    """How many runs its figures average, as it says."""
+    note: Annotated[str, Field(min_length=1, max_length=1000)] | None = None
+    """What else a reader must know to compare with it."""
+    tasks: dict[str, SourceTask] = Field(min_length=1)
+    """Our task id → the source's name of it and its limit."""
+
+
+class Figure(BaseModel):
+    """One algorithm on one task as a source prints it; ``steps`` and ``cost_limit`` default to the
+    source's (filled in when the file is read)."""
+
+    model_config = _schema()
+    source: SafeName
+    """A key of ``sources``."""
+    task: Text
+    """Our task id (docs/tasks.md), a key of its source's ``tasks``."""
+    algo: Text
+    """Our algorithm's name, a key of ``algorithms``."""
+    return_: tuple[Real, Std] = Field(alias="return")
+    """[mean, std] of the final return."""
+    cost: tuple[Real, Std]
+    """[mean, std] of the final cost."""
+    steps: Int(1, MAX_BUDGET) | None = None
+    """Env steps behind this figure (default: its source's)."""
+    cost_limit: Real | None = Field(None, ge=0)
+    """The limit of its runs (default: its source's for the task)."""
+    note: Text | None = None
+    """What differs for this figure (e.g. the algorithm's own limit)."""
+
+
+class Published(BaseModel):
+    """The published-figures file (sweeps/published.yaml)."""
+
+    model_config = _schema()
+    algorithms: dict[str, Text] = Field(min_length=1)
+    """Our algorithm names → the names the table prints (the paper's columns), in the table's order."""
+    sources: dict[SafeName, Source] = Field(min_length=1)
+    """The sources by a short id."""
+    figures: tuple[Figure, ...] = Field(min_length=1)
+    """The figures."""
+
+    @model_validator(mode="after")
+    def _resolve(self):
+        seen, filled = set(), []
+        for i, f in enumerate(self.figures):
+            if f.source not in self.sources:
+                raise KeyedError(("figures", i, "source"), f"{f.source!r} is not a source; accepted: "
+                                                           f"{', '.join(self.sources)}")
+            src = self.sources[f.source]
+            if f.task not in src.tasks:
+                raise KeyedError(("figures", i, "task"), f"{f.task!r} is not a task of {f.source}; accepted: "
+                                                         f"{', '.join(src.tasks)}")
+            if f.algo not in self.algorithms:
+                raise KeyedError(("figures", i, "algo"), f"{f.algo!r} is not in algorithms; accepted: "
+                                                         f"{', '.join(self.algorithms)}")
+            if (f.source, f.task, f.algo) in seen:
+                raise KeyedError(("figures", i), f"a second figure of {f.algo} on {f.task} from {f.source}")
+            seen.add((f.source, f.task, f.algo))
+            filled.append(f.model_copy(update={"steps": f.steps or src.steps,
+                                               "cost_limit": src.tasks[f.task].cost_limit
+                                               if f.cost_limit is None else f.cost_limit}))
+        self.figures = tuple(filled)
+        return self
+
+    def find(self, row: str, task: str, algo: str) -> Figure | None:
+        """The first figure of ``algo`` on ``task`` among the sources printed in ``row``."""
+        return next((f for f in self.figures if f.task == task and f.algo == algo
+                     and self.sources[f.source].row == row), None)
+
+    def task_order(self) -> list[str]:
+        """Our task ids in the order the sources list them (the papers' row order)."""
+        return list(dict.fromkeys(t for s in self.sources.values() for t in s.tasks))
+
+
+def load_published(path: str | Path = PUBLISHED_FILE, text: str | None = None) -> Published:
+    """The published figures at ``path``, checked; a PublishedError names the line and the key."""
+    path = Path(path)
+    try:
+        data, node = read_yaml(read_yaml_text(path) if text is None else text, yaml.SafeLoader)
+    except YamlRefused as e:
+        raise PublishedError(f"{path}{f':{e.line}' if e.line else ''}: {e.message}") from None
+    try:
+        return Published.model_validate(data)
+    except ValidationError as e:
+        raise PublishedError(_first_error(e, Origin(path, node))) from None
+
+
+def _first_error(e: ValidationError, origin: Origin) -> str:
+    err = e.errors()[0]
+    loc = tuple(err["loc"])
+    cause = (err.get("ctx") or {}).get("error")
+    if isinstance(cause, KeyedError):
+        loc = (*loc, *cause.loc)
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "extra_forbidden":
+        msg = f"unknown key {loc[-1]!r}"
+    return f"{origin(loc)}: {msg}"
+
+
+@functools.lru_cache(maxsize=1)
+def published() -> Published:
+    """The package's published figures (sweeps/published.yaml), read once."""
+    return load_published()
+
+
+# ----------------------------------------------------------------------------- the table
+
+
+@dataclasses.dataclass(frozen=True)
+class Cell:
+    """One algorithm on one task: its seeds' final return and cost."""
+
+    n_seeds: int  #: finished trials (those averaged)
+    n_failed: int  #: failed trials and trials stopped early (counted, not averaged)
+    ret: tuple[float, float, float, float]  #: mean, std, 95% interval low, high
+    cost: tuple[float, float, float, float]
+    cost_limit: float
+    feasible: bool = False  #: mean cost ≤ the limit
+    best: bool = False  #: the task's highest feasible mean return (ties kept)
+
+
+@dataclasses.dataclass(frozen=True)
+class Table:
+    """Tasks (rows) × algorithms (columns); ``cells[(task, algo)]``, absent where one did not run."""
+
+    tasks: tuple[str, ...]
+    algos: tuple[str, ...]
+    cells: dict
+    limits: dict  #: task → its limit (the trials' median)
+    published: Published
+
+    def name(self, algo: str) -> str:
+        """The column's name: the paper's for its algorithms, else ours (a user's module path)."""
+        return self.published.algorithms.get(algo, algo)
+
+
+def _one_configuration_each(df: pd.DataFrame) -> bool:
+    """Whether every (task, algorithm) ran one configuration (its seeds), by every column that names
+    one (a search's samples share their group and differ in ``config``)."""
+    keys = [k for k in ("group", "param", "value", "config", "config_id") if k in df]
+    if not keys:
+        return True
+    configs = df[keys].map(str).agg("|".join, axis=1)
+    return bool((configs.groupby([df["task"].astype(str), df["algo"].astype(str)]).nunique() <= 1).all())
+
+
+def _stats(x: pd.Series) -> tuple[float, float, float, float]:
+    mean, lo, hi = interval(x, "mean")
+    return mean, float(x.std(ddof=1)), lo, hi  # the std is NaN with one seed
+
+
+def _column_order(algos: list[str], names: list[str]) -> list[str]:
+    """The published file's order (the paper's columns, LAC last); another algorithm (a user's
+    module) before LAC, by name."""
+    last = names.index(DEFAULT_ALGO) - 0.5 if DEFAULT_ALGO in names else len(names)
+    return sorted(algos, key=lambda a: (names.index(a) if a in names else last, a))
+
+
+def build_table(trials: pd.DataFrame, pub: Published | None = None) -> Table | None:
+    """The table of ``trials`` (one row per trial, with ``task`` and ``algo``), or None where the
+    sweep is not one over algorithms (the module docstring)."""
+    if trials is None or trials.empty or "algo" not in trials or trials["algo"].astype(str).nunique() < 2:
+        return None
+    df, failed = prepared(trials)
+    if COST_LIMIT not in df:
+        df[COST_LIMIT] = math.nan
+    if not _one_configuration_each(df):
+        return None
+    pub = pub or published()
+    left_out = failed | df["status"].astype(str).eq("STOPPED")
+    order = pub.task_order()
+    tasks = sorted(dict.fromkeys(df["task"].astype(str)),
+                   key=lambda t: (order.index(t) if t in order else len(order), t))
+    algos = _column_order(list(dict.fromkeys(df["algo"].astype(str))), list(pub.algorithms))
+    cells, limits = {}, {}
+    for task in tasks:
+        at = df["task"].astype(str) == task
+        limits[task] = float(pd.to_numeric(df.loc[at, COST_LIMIT], errors="coerce").median())
+        for algo in algos:
+            rows = at & (df["algo"].astype(str) == algo)
+            if not rows.any():
+                continue
+            ok = df[rows & ~left_out]
+            ret, cost = (pd.to_numeric(ok[c], errors="coerce") for c in (EPISODE_RETURN, EPISODE_COST))
+            limit = pd.to_numeric(df.loc[rows, COST_LIMIT], errors="coerce").median()
+            limit = limits[task] if is_na(limit) else float(limit)
+            c = Cell(len(ok), int((rows & left_out).sum()), _stats(ret), _stats(cost), limit)
+            cells[(task, algo)] = dataclasses.replace(c, feasible=bool(c.cost[0] <= limit))  # NaN: False
+    for task in tasks:
+        feasible = {a: c for (t, a), c in cells.items() if t == task and c.feasible and not is_na(c.ret[0])}
+        if feasible:
+            top = round(max(c.ret[0] for c in feasible.values()), 2)
+            for a, c in feasible.items():
+                cells[(task, a)] = dataclasses.replace(c, best=round(c.ret[0], 2) == top)
+    return Table(tuple(tasks), tuple(algos), cells, limits, pub)
+
+
+# ----------------------------------------------------------------------------- how it is written
+
+
+def _pm(mean_std) -> str:
+    mean, std = mean_std[0], mean_std[1]
+    return "–" if is_na(mean) else f"{fmt_num(mean)} ± {fmt_num(std)}"
+
+
+def steps_text(n: int) -> str:
+    """Env steps as the papers write them: 2.5M, 10M, 40k."""
+    for unit, size in (("M", 1_000_000), ("k", 1_000)):
+        if n >= size:
+            return f"{n / size:g}{unit}"
+    return str(n)
+
+
+def _shown_figures(table: Table) -> list[Figure]:
+    return [f for f in (table.published.find(r, t, a) for r in ROWS for t in table.tasks for a in table.algos)
+            if f is not None]
+
+
+def budget_caption(table: Table, budget_steps: int, budget_note: str = "") -> str:
+    """What the table's runs had and what the published figures beside them had: a table at
+    another budget never reads as the paper's."""
+    text = f"Budget: {budget_steps:,} env steps per trial" + (f" ({budget_note})" if budget_note else "")
+    steps = {}
+    for f in _shown_figures(table):
+        steps.setdefault(table.published.sources[f.source].row, set()).add(f.steps)
+    if not steps:
+        return text + "."
+    theirs = "; ".join(f"{ROWS[r]}'s at {' and '.join(steps_text(s) for s in sorted(v))}"
+                       for r, v in steps.items())
+    if steps.get("paper") == {budget_steps}:
+        return f"{text}, the paper's. The published figures beside the cells: {theirs} env steps."
+    return (f"{text}, not the published figures' ({theirs} env steps): they are beside the cells as a reference, "
+            "not as results at this budget.")
+
+
+def _ours(cell: Cell | None, which: str, intervals: bool = True) -> str:
+    """A cell's return (``which="ret"``) or cost as the markdown prints it."""
+    if cell is None:
+        return ""
+    if not cell.n_seeds:
+        return f"failed ({cell.n_failed})" if which == "ret" else ""
+    mean, std, lo, hi = getattr(cell, which)
+    text = _pm((mean, std))
+    text = f"**{text}**" if cell.feasible else text
+    if which == "ret" and cell.best:
+        text += f" {BEST_MARK}"
+    if intervals:
+        text += f" [{fmt_num(lo)}, {fmt_num(hi)}]" if not is_na(lo) else " [–]"
+    if which == "ret" and cell.n_failed:
+        text += f" ({cell.n_seeds} seeds; {cell.n_failed} failed or stopped)"
+    return text
+
+
+def _published_rows(table: Table, task: str) -> list[tuple[str, list[Figure | None], bool]]:
+    """(row label, the figure per algorithm or None, whether each cell names its steps) for each
+    source row with a figure on ``task``; a label names the steps when its figures share them."""
+    rows = []
+    for key, label in ROWS.items():
+        figs = [table.published.find(key, task, a) for a in table.algos]
+        steps = {f.steps for f in figs if f is not None}
+        if steps:
+            one = len(steps) == 1
+            rows.append((f"{label} ({steps_text(next(iter(steps)))})" if one else label, figs, not one))
+    return rows
+
+
+def _figure_text(f: Figure | None, with_steps: bool) -> str:
+    if f is None:
+        return ""
+    return f"{_pm(f.return_)} / {_pm(f.cost)}" + (f" ({steps_text(f.steps)})" if with_steps else "")
+
+
+def legend_line(intervals: bool = True) -> str:
+    what = (f"Mean ± std over seeds [{CONFIDENCE:.0%} bootstrap interval of the mean]" if intervals else
+            f"Mean ± std over seeds (the {CONFIDENCE:.0%} intervals: summary/table.md)")
+    return (f"{what}; **bold**: feasible (mean cost ≤ the limit); {BEST_MARK}: the task's best feasible return "
+            "(ties kept). Below each task: the same algorithm as published, return / cost (blank: none published).")
+
+
+def _sources(table: Table) -> tuple[list[Source], list[str]]:
+    """The sources of the figures shown, and the figures' own notes (once per algorithm and note)."""
+    shown = _shown_figures(table)
+    notes = dict.fromkeys((f.algo, ROWS[table.published.sources[f.source].row], f.note) for f in shown if f.note)
+    return ([table.published.sources[k] for k in dict.fromkeys(f.source for f in shown)],
+            [f"{table.name(algo)} ({col}): {note}" for algo, col, note in notes])
+
+
+def _source_text(s: Source) -> str:
+    return (f"{s.simulator}; {s.steps:,} env steps" + (f"; {s.seeds}" if s.seeds else "")
+            + (f". {s.note}" if s.note else ""))
+
+
+def sources_lines(table: Table) -> list[str]:
+    """The sources of the figures shown as markdown list items, then the figures' own notes."""
+    sources, notes = _sources(table)
+    return ([f"- {ROWS[s.row]}: [{s.title}]({s.url}); {_source_text(s)}" for s in sources]
+            + [f"- {note}" for note in notes])
+
+
+def markdown(table: Table, budget_steps: int, budget_note: str = "", intervals: bool = True,
+             sources: bool = True) -> str:
+    """The table as markdown (``table.md``, the note): its budget, a block of rows per task (our
+    return and cost, then each source's figures), the legend, the seeds and the sources."""
+    def row(*cells) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+    lines = [f"**Final return and cost per task and algorithm.** {budget_caption(table, budget_steps, budget_note)}",
+             "", row("task (limit)", "", *(table.name(a) for a in table.algos)),
+             "|---|---|" + "---:|" * len(table.algos)]
+    for task in table.tasks:
+        cells = [table.cells.get((task, a)) for a in table.algos]
+        lines.append(row(f"`{task}` ({_limit_text(table.limits[task])})", "return",
+                         *(_ours(c, "ret", intervals) for c in cells)))
+        lines.append(row("", "cost", *(_ours(c, "cost", intervals) for c in cells)))
+        lines += [row("", label, *(_figure_text(f, each) for f in figs))
+                  for label, figs, each in _published_rows(table, task)]
+    counts = [c.n_seeds for c in table.cells.values() if c.n_seeds]
+    lines += ["", legend_line(intervals), "", seeds_line(counts)]
+    if sources and _shown_figures(table):
+        lines += ["", "Published figures:", *sources_lines(table)]
+    return "\n".join(lines) + "\n"
+
+
+def _limit_text(limit: float) -> str:
+    return "no limit" if is_na(limit) else f"limit {limit:g}"
+
+
+def table_markdown(trials: pd.DataFrame, budget_steps: int, budget_note: str = "", limit: int | None = None) -> str:
+    """The table of ``trials`` as markdown for the parent run's note, "" when the sweep has none
+    (the module docstring). With ``limit`` (characters), the intervals, then the sources' lines are
+    left out (they stay in summary/table.md) until it fits; what still does not is cut."""
+    table = build_table(trials)
+    if table is None:
+        return ""
+    text = ""
+    for intervals, sources in ((True, True), (False, True), (False, False)):
+        text = markdown(table, budget_steps, budget_note, intervals, sources)
+        if limit is None or len(text) <= limit:
+            return text
+    kept = text[:limit - 40].rpartition("\n")[0]  # whole lines
+    return kept + "\n… (the rest: summary/table.md)\n"
+
+
+# ----------------------------------------------------------------------------- table.html, table.png
+
+
+HTML_STYLE = """
+body { font-family: sans-serif; font-size: 13px; margin: 16px; }
+table { border-collapse: collapse; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; white-space: nowrap; }
+th { background: #f3f3f3; }
+td.task { text-align: left; font-family: monospace; }
+td.what { text-align: left; color: #555; }
+td.pub { color: #777; font-size: 12px; }
+tr.first td { border-top: 2px solid #888; }
+.best { color: %s; }
+caption { caption-side: top; text-align: left; padding: 6px 0; max-width: 1200px; white-space: normal; }
+""" % BEST_COLOUR
+
+
+def _html_ours(cell: Cell | None, which: str) -> str:
+    """A cell's return or cost with its interval and seeds on hover (``title``)."""
+    if cell is None:
+        return "<td></td>"
+    if not cell.n_seeds:
+        return f"<td>failed ({cell.n_failed})</td>" if which == "ret" else "<td></td>"
+    mean, std, lo, hi = getattr(cell, which)
+    ci = f"[{fmt_num(lo)}, {fmt_num(hi)}]" if not is_na(lo) else "[–] (one seed)"
+    what = "return" if which == "ret" else "cost"
+    hover = f"{what} mean {fmt_num(mean)}, {CONFIDENCE:.0%} interval {ci}; {cell.n_seeds} seeds" + (
+        f", +{cell.n_failed} failed or stopped" if cell.n_failed else "")
+    text = html.escape(_pm((mean, std)))
+    text = f"<b>{text}</b>" if cell.feasible else text
+    if which == "ret" and cell.best:
+        text = f'<span class="best">{text} {BEST_MARK}</span>'
+    return f'<td title="{html.escape(hover)}">{text}</td>'
+
+
+def _html_figure(table: Table, f: Figure | None, with_steps: bool) -> str:
+    if f is None:
+        return '<td class="pub"></td>'
+    s = table.published.sources[f.source]
+    hover = (f"{s.title}: {s.tasks[f.task].name}, {f.steps:,} env steps, limit {f.cost_limit:g}, {s.simulator}"
+             + (f". {f.note}" if f.note else ""))
+    return f'<td class="pub" title="{html.escape(hover)}">{html.escape(_figure_text(f, with_steps))}</td>'
+
+
+def table_html(table: Table, budget_steps: int, path, budget_note: str = "") -> str:
+    """The table as a standalone HTML page: the intervals, seeds and sources on hover."""
+    caption = (f"<b>Final return and cost per task and algorithm.</b> "
+               f"{html.escape(budget_caption(table, budget_steps, budget_note))}<br>"
+               f"{html.escape(legend_line()).replace('**bold**', '<b>bold</b>')} Hover a cell for its interval "
+               "and seeds, a published figure for its source.")
+    head = "".join(f"<th>{html.escape(table.name(a))}</th>" for a in table.algos)
+    rows = [f"<tr><th>task (limit)</th><th></th>{head}</tr>"]
+    for task in table.tasks:
+        cells = [table.cells.get((task, a)) for a in table.algos]
+        rows.append(f'<tr class="first"><td class="task">{html.escape(task)} ({_limit_text(table.limits[task])})</td>'
+                    f'<td class="what">return</td>{"".join(_html_ours(c, "ret") for c in cells)}</tr>')
+        rows.append(f'<tr><td></td><td class="what">cost</td>{"".join(_html_ours(c, "cost") for c in cells)}</tr>')
+        rows += [f'<tr><td></td><td class="what">{html.escape(label)}</td>'
+                 f'{"".join(_html_figure(table, f, each) for f in figs)}</tr>'
+                 for label, figs, each in _published_rows(table, task)]
+    found, notes = _sources(table)
+    sources = "".join([f'<li>{ROWS[s.row]}: <a href="{html.escape(s.url)}">{html.escape(s.title)}</a>; '
+                       f"{html.escape(_source_text(s))}</li>" for s in found]
+                      + [f"<li>{html.escape(note)}</li>" for note in notes])
+    body = (f"<table><caption>{caption}</caption>{''.join(rows)}</table>"
+            + (f"<p>Published figures:</p><ul>{sources}</ul>" if sources else ""))
+    Path(path).write_text(f'<!DOCTYPE html><html><head><meta charset="utf-8"><title>The table</title>'
+                          f"<style>{HTML_STYLE}</style></head><body>{body}</body></html>\n", encoding="utf-8")
+    return str(path)
+
+
+#: How each row of published figures is drawn in table.png: (marker, colour).
+MARKERS = {"paper": ("D", "tab:orange"), "omnisafe": ("X", "tab:purple")}
+
+
+def table_png(table: Table, budget_steps: int, path, budget_note: str = "") -> str:
+    """The table as a figure: a row of panels per task (final return, final cost), a bar per
+    algorithm with its interval, feasible ones dark, the best blue, infeasible ones grey; the
+    published figures as markers, the limit dashed."""
+    import textwrap
+
+    k = len(table.algos)
+    fig, axes = plt.subplots(len(table.tasks), 2, figsize=(13, (0.42 * k + 1.3) * len(table.tasks) + 1.1),
+                             squeeze=False)
+    y = np.arange(k)[::-1]  # the first algorithm at the top, as the table's first column
+    for (ax_r, ax_c), task in zip(axes, table.tasks):
+        cells = [table.cells.get((task, a)) for a in table.algos]
+        for ax, which in ((ax_r, "ret"), (ax_c, "cost")):
+            for yi, algo, cell in zip(y, table.algos, cells):
+                _bar(ax, yi, cell, which)
+                for key, (marker, colour) in MARKERS.items():
+                    f = table.published.find(key, task, algo)
+                    if f is not None:
+                        ax.plot((f.return_ if which == "ret" else f.cost)[0], yi, marker, color=colour, ms=6, mew=1)
+            ax.axvline(0, color="black", lw=0.5)
+            ax.set_yticks(y, [_tick(table, a, c) for a, c in zip(table.algos, cells)], fontsize=9)
+            for tick, cell in zip(ax.get_yticklabels(), cells):
+                tick.set_fontweight("bold" if cell is not None and cell.feasible else "normal")
+        if not is_na(table.limits[task]):
+            ax_c.axvline(table.limits[task], ls="--", color="tab:red")
+        ax_r.set_title(f"{task}: final return", fontsize=10)
+        ax_c.set_title(f"{task}: final cost ({_limit_text(table.limits[task])})", fontsize=10)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in (BEST_COLOUR, "#4a4a4a", "#c8c8c8")]
+    labels = [f"best feasible ({BEST_MARK})", "feasible (bold)", "over the limit"]
+    for key, (marker, colour) in MARKERS.items():
+        handles.append(plt.Line2D([], [], ls="", marker=marker, color=colour))
+        labels.append(f"{ROWS[key]} (published)")
+    handles.append(plt.Line2D([], [], ls="--", color="tab:red"))
+    labels.append("cost limit")
+    fig.legend(handles, labels, loc="upper center", ncol=len(labels), fontsize=9, bbox_to_anchor=(0.5, 1.0),
+               frameon=False)
+    caption = budget_caption(table, budget_steps, budget_note)
+    height = fig.get_figheight()  # the legend and the caption take the top 0.8 inches
+    fig.text(0.5, 1 - 0.32 / height, "\n".join(textwrap.wrap(
+        f"Mean over seeds with its {CONFIDENCE:.0%} interval. {caption}", 150)), ha="center", va="top", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.8 / height))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)
+
+
+def _bar(ax, yi: float, cell: Cell | None, which: str) -> None:
+    if cell is None or not cell.n_seeds or is_na(getattr(cell, which)[0]):
+        return
+    mean, _, lo, hi = getattr(cell, which)
+    colour = BEST_COLOUR if cell.best else "#4a4a4a" if cell.feasible else "#c8c8c8"
+    ax.barh(yi, mean, height=0.6, color=colour)
+    if not (is_na(lo) or is_na(hi)):
+        ax.errorbar(mean, yi, xerr=[[mean - lo], [hi - mean]], color="black", capsize=3, lw=1)
+
+
+def _tick(table: Table, algo: str, cell: Cell | None) -> str:
+    name = table.name(algo)
+    if cell is None:
+        return f"{name} (not run)"
+    if not cell.n_seeds:
+        return f"{name} (failed)"
+    return f"{name} {BEST_MARK}" if cell.best else name
+
+
+def write_table_report(trials: pd.DataFrame, out_dir, budget_steps: int,
+                       budget_note: str = "") -> dict[str, str] | None:
+    """Write table.md, table.html and table.png of ``trials`` into ``out_dir``; {file name: path},
+    or None when the sweep has no table (the module docstring). ``budget_steps``: the sweep's env
+    steps per trial; ``budget_note``: what else the budget means (a quick budget's small networks)."""
+    table = build_table(trials)
+    if table is None:
+        return None
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "table.md").write_text(markdown(table, budget_steps, budget_note), encoding="utf-8")
+    return {"table.md": str(out / "table.md"),
+            "table.html": table_html(table, budget_steps, out / "table.html", budget_note),
+            "table.png": table_png(table, budget_steps, out / "table.png", budget_note)}
