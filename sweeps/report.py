@@ -27,7 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from lac_rllib.algorithms.registry import DEFAULT_ALGO
+from lac_rllib.algorithms.registry import ALGOS, DEFAULT_ALGO
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE  # noqa: E402
 from sweeps.configurations import KEYS  # noqa: E402
 from sweeps.configurations import ci as _ci  # noqa: E402
@@ -186,7 +186,8 @@ def algorithm_comparison(summary: pd.DataFrame) -> str:
                  "| algorithm | seeds | return mean [95% CI] | return IQM [95% CI] | cost mean [95% CI] | "
                  "cost IQM [95% CI] | feasible seeds | P(LAC return > X) | P(LAC cost < X) |",
                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-        for r in g.to_dict("records"):
+        order = {a: i for i, a in enumerate(ALGOS)}  # the registry's order, LAC first; a user's module after
+        for r in sorted(g.to_dict("records"), key=lambda r: (order.get(r["value"], len(order)), str(r["value"]))):
             lac = r["value"] == DEFAULT_ALGO
             beats = ["–", "–"] if lac else [_poi(1 - r[k]) if not _is_na(r[k]) else "–"
                                             for k in ("poi_return_vs_default", "poi_cost_vs_default")]

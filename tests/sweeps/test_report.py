@@ -164,8 +164,9 @@ def test_write_sweep_reports(tmp_path):
 def test_a_compare_sweep_puts_every_algorithm_beside_lac():
     """P(LAC beats X) is read off the hand-made seeds (U statistic, ties one half); the best
     algorithm within the limit is the feasible one with the most return, not the top return."""
-    rows = [_trial(f"l{s}", "lac", s, r, c, group="compare", param="algo", limit=2.0)
-            for s, (r, c) in enumerate([(10.0, 1.0), (12.0, 1.5), (14.0, 0.5)])]
+    rows = [_trial(f"c{s}", "cup", s, 1.0, 0.0, group="compare", param="algo", limit=2.0) for s in range(2)]
+    rows += [_trial(f"l{s}", "lac", s, r, c, group="compare", param="algo", limit=2.0)
+             for s, (r, c) in enumerate([(10.0, 1.0), (12.0, 1.5), (14.0, 0.5)])]
     rows += [_trial(f"p{s}", "ppo_lag", s, r, c, group="compare", param="algo", limit=2.0)
              for s, (r, c) in enumerate([(11.0, 0.2), (8.0, 0.1), (9.0, 0.3)])]  # LAC returns beat 8 of 9 pairs
     rows += [_trial(f"s{s}", "sac_lag", s, r, c, group="compare", param="algo", limit=2.0)
@@ -180,6 +181,8 @@ def test_a_compare_sweep_puts_every_algorithm_beside_lac():
     assert [c.strip() for c in sac.strip("|").split("|")][-2:] == ["0.00", "1.00"]
     assert "**Best within the limit:** lac, return 12.00" in text
     assert "| lac | 3 |" in text and "– | – |" in text.split("| lac |")[1].splitlines()[0]
+    listed = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| ") and "seeds" not in line]
+    assert listed == ["lac", "ppo_lag", "sac_lag", "cup"]  # the registry's order, LAC first (not by name)
     assert report.algorithm_comparison(report.summarize(hand_table())) == ""  # no algorithms compared
 
 
