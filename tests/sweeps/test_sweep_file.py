@@ -37,7 +37,9 @@ def legacy_grid(space, task, seeds, budget):
 
     task = task or {"smoke": "lac/PointHazard-v0", "paper": None}.get(space, "lac/PointHazard-v0")
     if space == "compare":
-        algos = ("lac", "ppo_lag", "sac_lag")
+        from lac_rllib.algorithms.registry import ALGOS
+
+        algos = tuple(ALGOS)  # every algorithm of the package since issue 33 (3 before: lac, ppo_lag, sac_lag)
         return [("compare", "algo", a, task, s, {"algo": a}) for a in algos for s in range(seeds)]
     if space == "paper":
         return [("paper", "", None, t, s, {}) for t in ((task,) if task else LEGACY_PAPER_TASKS) for s in range(seeds)]
