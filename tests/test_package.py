@@ -98,7 +98,8 @@ def test_no_algorithm_folder_imports_another_but_its_house():
     crossing = [f"{path.relative_to(ROOT)} imports {m}"
                 for name in folders for path in sorted((ALGO_DIR / name).rglob("*.py"))
                 for m in _imports(path)
-                if m.startswith("lac_rllib.algorithms.") and m.split(".")[2] not in (name, "registry", houses.get(name))]
+                if m.startswith("lac_rllib.algorithms.")
+                and m.split(".")[2] not in (name, "registry", houses.get(name))]
     assert not crossing, crossing
 
 
