@@ -47,6 +47,9 @@ ALGOS: dict[str, str] = {
     "cup": "lac_rllib.algorithms.cup.config",
     "p3o": "lac_rllib.algorithms.p3o.config",
     "respo": "lac_rllib.algorithms.respo.config",
+    "trpo_lag": "lac_rllib.algorithms.trpo_lag.config",
+    "cpo": "lac_rllib.algorithms.cpo.config",
+    "pcpo": "lac_rllib.algorithms.pcpo.config",
 }
 DEFAULT_ALGO = "lac"
 #: The name of the trial field that picks the algorithm (``--set algo=ppo_lag``, a grid over it).

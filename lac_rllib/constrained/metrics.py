@@ -59,6 +59,12 @@ PROJECTION_EPOCHS = "projection_epochs"  # CUP: epochs stage 2 trained before it
 PROJECTION_KL = "projection_kl"  # CUP: KL(π_stage1 ‖ π) over the batch at stage 2's last check
 REACH_VF_LOSS = "reach_vf_loss"  # RESPO: masked mean (V_p − p-target)², last minibatch
 REACH_PROB_MEAN = "reach_prob_mean"  # RESPO: mean V_p(s) over the batch at collection
+# The trust-region baselines (TRPO-Lag, CPO, PCPO): one step of the policy per iteration, whose
+# KL(π_old ‖ π) over the batch afterwards is KL_FULL_BATCH.
+LINE_SEARCH_FRACTION = "line_search_fraction"  # the fraction of the full step kept; 0: none accepted, θ_old kept
+LINE_SEARCH_BACKTRACKS = "line_search_backtracks"  # fractions rejected before the accepted one (all if none)
+COST_GAP = "cost_gap"  # CPO, PCPO: c = Ĵ_C − b as the step used it (cost_gap_scale); NaN: no episode yet
+CPO_CASE = "cpo_case"  # CPO: the case of its step, 0-4 (OmniSafe's numbering: 3-4 TRPO, 1-2 dual, 0 recovery)
 #: A row's values that must be finite: a NaN here fails the trial (sweeps/trainable.py).
 MUST_BE_FINITE = (CRITIC_LOSS, ACTOR_LOSS, NU)
 

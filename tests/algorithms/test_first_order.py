@@ -1,6 +1,7 @@
-"""What every first-order baseline on PPO-Lag's house must do inside RLlib, one test per claim,
-each run for FOCOPS, CUP, P3O and RESPO: each train row carries its own cost, a checkpoint round
-trip continues with an identical next iteration, and the registry names it everywhere."""
+"""What every baseline on PPO-Lag's house must do inside RLlib, one test per claim, each run for the
+first-order ones (FOCOPS, CUP, P3O, RESPO) and the trust-region ones (TRPO-Lag, CPO, PCPO): each
+train row carries its own cost, a checkpoint round trip continues with an identical next
+iteration, and the registry names it everywhere."""
 
 import copy
 
@@ -16,6 +17,8 @@ from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.metrics import EPISODE_COST, EPISODE_RETURN, NU
 
 FIRST_ORDER = ("focops", "cup", "p3o", "respo")
+TRUST_REGION = ("trpo_lag", "cpo", "pcpo")
+ON_PPO_LAG_HOUSE = FIRST_ORDER + TRUST_REGION
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 SMALL = {"train_batch_size_per_learner": 200, "minibatch_size": 50, "num_epochs": 2, "num_envs_per_env_runner": 1}
 
@@ -32,7 +35,7 @@ def _flat(tree, prefix=""):
     return {prefix: tree}
 
 
-@pytest.mark.parametrize("algo", FIRST_ORDER)
+@pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)
 def test_every_train_row_carries_its_own_cost(ray_session, monkeypatch, algo):
     # 50 steps per iteration with 7-step episodes: chunks are cut mid-episode every time.
     learner_class = registry.build_config(algo, PROBE, 0, {}, timesteps=1000).get_default_learner_class()
@@ -59,7 +62,7 @@ def test_every_train_row_carries_its_own_cost(ray_session, monkeypatch, algo):
     assert result[EPISODE_COST] == 49.0 and result[EPISODE_RETURN] == -21.0 and np.isfinite(result[NU])
 
 
-@pytest.mark.parametrize("algo", FIRST_ORDER)
+@pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)
 def test_a_checkpoint_round_trip_gives_an_identical_next_iteration(ray_session, monkeypatch, tmp_path, algo):
     """After 2 iterations: save, restore, and train one more iteration on the same sampled episodes
     from the original and from the restored algorithm: every learner tensor (weights, optimizer
@@ -95,7 +98,7 @@ def test_a_checkpoint_round_trip_gives_an_identical_next_iteration(ray_session, 
             restored.stop()
 
 
-@pytest.mark.parametrize("algo", FIRST_ORDER)
+@pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)
 def test_the_registry_names_it_everywhere(algo):
     module = registry.algo_config(algo)
     assert registry.check_algo(algo) == algo and algo in registry.algos_text()

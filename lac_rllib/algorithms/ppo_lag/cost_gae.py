@@ -71,7 +71,11 @@ class CostGAE(ConnectorV2):
 
     It keeps the observations, behaviour-policy inputs and mask of the last batch it completed
     (``last_batch``: module id → those columns): the learner's KL early stop measures the policy's
-    drift on the whole batch (learner.py)."""
+    drift on the whole batch (learner.py). A learner that needs more of the whole batch (the
+    trust-region step: actions, log-probabilities, both advantages) sets ``kept_columns``."""
+
+    #: The columns of the whole batch ``last_batch`` keeps (PPO-Lag: the KL early stop's).
+    kept_columns: tuple[str, ...] = KL_COLUMNS
 
     def __init__(self, input_observation_space=None, input_action_space=None, *, gamma: float, lambda_: float,
                  standardize: bool = False):
@@ -103,5 +107,5 @@ class CostGAE(ConnectorV2):
                                                                mask),
             }
             columns.update({k: torch.from_numpy(v).to(values_t.device) for k, v in out.items()})
-            self.last_batch[module_id] = {k: columns[k] for k in KL_COLUMNS}
+            self.last_batch[module_id] = {k: columns[k] for k in self.kept_columns}
         return batch

@@ -1,0 +1,93 @@
+"""CPOConfig: Constrained Policy Optimization (Achiam et al. 2017) on TRPO-Lag's house.
+
+CPO takes TRPO-Lag's step (the whole batch, conjugate gradient, the line search) without a
+multiplier: the step solves the linearised problem max gᵀΔ s.t. bᵀΔ + c ≤ 0, ½ΔᵀHΔ ≤ δ in closed
+form from its dual, recovering along −H⁻¹b when no feasible point is in reach (learner.py;
+constrained/trust_region.py ``cpo_step``). :class:`CostStepParams` are the fields PCPO shares.
+
+Source tags: [O] OmniSafe CPO (configs/on-policy/CPO.yaml, second_order/cpo.py), [S]
+safety-starter-agents CPO (pg/agents.py ``CPOAgent``: the paper's CPO, App. D), [D] ours. The
+defaults are [O]'s; the ``ssa`` preset is [S]'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from lac_rllib.algorithms.trpo_lag import config as trpo_lag
+from lac_rllib.algorithms.trpo_lag.config import TRPOLagConfig, TrustRegionParams
+from lac_rllib.constrained import fields, metrics
+from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
+
+PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "ssa")
+COST_GAP_SCALES = ("none", "episode_length")
+DUAL_CONVENTIONS = ("paper", "omnisafe")
+
+
+@dataclasses.dataclass
+class CostStepParams(TrustRegionParams):
+    """The fields of the trust-region steps that read the cost gap (CPO, PCPO), after the family's."""
+
+    # --- cost gap ---
+    cost_gap_scale: str = param("none", accepts=one_of(COST_GAP_SCALES))
+    """The units of c = Ĵ_C − b in the linearised constraint c + bᵀΔ ≤ 0, b the gradient of the
+    per-step cost surrogate mean(r·A^C): "none", the episode cost's own [O cpo.py:391]; or
+    "episode_length", divided by the mean length of the episodes Ĵ_C is taken over [S agents.py:
+    ``c /= rescale``], the per-step units of bᵀΔ. ~1000× apart on 1000-step tasks, which decides
+    the case (docs/baselines.md, "TRPO-Lagrangian, CPO and PCPO")."""
+
+
+@dataclasses.dataclass
+class CPOParams(CostStepParams):
+    """The CPO hyperparameters: its preset, the dual's convention and the line search's length,
+    after the cost-gap and trust-region fields (no multiplier)."""
+
+    # --- preset ---
+    preset: str | None = param(None, accepts=or_none(one_of(PRESET_NAMES)))
+    """The preset applied: the task's (``.task(id)``) or one named with ``.task(id, preset=...)`` /
+    ``training(preset=...)``: "mujoco", "safety_gym" and "omnisafe" [O], "tiny" [D], "ssa" [S]
+    (see ``PRESETS``)."""
+
+    # --- CPO ---
+    dual_convention: str = param("paper", accepts=one_of(DUAL_CONVENTIONS))
+    """The closed-form dual of cases 1-2: "paper", Achiam et al.'s App. 10.2 with r = gᵀH⁻¹b
+    taken in its minimising sign [S agents.py]; "omnisafe", [O cpo.py:291-326]'s, which puts the
+    ascent-form r into those formulas (a sign error: its ν* is not the problem's)."""
+    backtrack_iters: int = param(20, accepts=INT_GE_1)
+    """Fractions 1, c, c², … of the step the line search tries before it keeps θ_old [O
+    _update_actor: total_steps=20; S backtrack_iters 10]."""
+
+
+#: [S] CPO as the paper ran it: TRPO-Lag's ssa values and c divided by the mean episode length.
+SSA = {**trpo_lag.SSA_TRUST_REGION, "cost_gap_scale": "episode_length"}
+PRESETS: dict[str, dict[str, Any]] = {
+    "safety_gym": {"num_envs_per_env_runner": 10},  # [O] CPO.yaml is the defaults (speed only, as TRPO-Lag's)
+    "mujoco": {"num_envs_per_env_runner": 5},
+    "tiny": dict(trpo_lag.TINY_TRUST_REGION),  # [D] TRPO-Lag's tiny sizes
+    "omnisafe": {},
+    "ssa": SSA,
+}
+
+#: CPO's fields and what each accepts (lac_rllib/algorithms/registry.py).
+FIELDS = fields.FieldSet(CPOParams, "CPO")
+
+
+class CPOConfig(TRPOLagConfig):
+    """Config for :class:`lac_rllib.algorithms.cpo.algorithm.CPO`; fields: :class:`CPOParams`."""
+
+    PARAMS, FIELDS, PRESETS = CPOParams, FIELDS, PRESETS
+    REPORTED_KEYS = (*trpo_lag.TRUST_REGION_KEYS, metrics.COST_GAP, metrics.CPO_CASE)
+    ALGORITHM_CLASS = "lac_rllib.algorithms.cpo.algorithm.CPO"
+    LEARNER_CLASS = "lac_rllib.algorithms.cpo.learner.CPOTorchLearner"
+
+
+CONFIG_CLASS, PARAMS = CPOConfig, CPOParams
+ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = trpo_lag.ACTIONS, trpo_lag.SPEED_FIELDS, trpo_lag.BUDGET_FIELDS
+benchmark_fields, plan_update_s = trpo_lag.benchmark_fields, trpo_lag.plan_update_s
+
+
+def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
+                 timesteps: int | None = None, cpus: int = 1) -> CPOConfig:
+    """The CPOConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
+    return CPOConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

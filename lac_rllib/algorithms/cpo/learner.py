@@ -1,0 +1,123 @@
+"""CPOTorchLearner: TRPO-Lag's learner with CPO's step and no multiplier. Source tags: [CPO]
+Achiam et al. 2017 (§6.1, §6.2, App. 10.2); [O] OmniSafe cpo.py ``_update_actor``; [S]
+safety-starter-agents agents.py ``CPOAgent.update_pi``. The maths is constrained/trust_region.py's.
+
+At the update's first loss call, on the whole batch's real rows (TRPO-Lag's :class:`PolicyOnBatch`):
+
+    g = ∇ mean r·A^R,   b = ∇ mean r·A^C                        [O _loss_pi, _loss_pi_cost]
+    x = H⁻¹g, p = H⁻¹b (two conjugate-gradient solves),  q = xᵀHx, r = gᵀp, s = bᵀp
+    c = (Ĵ_C − d) / (mean episode length, with cost_gap_scale="episode_length" [S])   [O cpo.py:391]
+
+then the case (0-4) and the step of the linearised problem max gᵀΔ s.t. c + bᵀΔ ≤ 0,
+½ΔᵀHΔ ≤ δ: TRPO's step when the whole trust region is feasible (3, 4), (x − ν*p)/λ* from the
+closed-form dual (1, 2), the recovery −√(2δ/s)·p when no feasible point is in reach (0); then
+the line search [O _cpo_search_step; S]: KL̄ ≤ δ, the cost surrogate rises by at most max(−c, 0),
+and in cases 2-4 the reward's loss does not rise. Ĵ_C is PPO-Lag's cost window; with no episode
+completed yet c = −∞ (no known violation: case 3). ``nu`` reports ν* (0 in cases 3-4, the
+recovery's √(2δ/s) in case 0 [O Nu_star]); the module's ν stays 0. PCPO replaces
+:meth:`constrained_step`.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+
+import torch
+from ray.rllib.evaluation.postprocessing import Postprocessing
+from ray.rllib.utils.annotations import override
+
+from lac_rllib.algorithms.cpo.episode_lengths import EpisodeLengths
+from lac_rllib.algorithms.trpo_lag.learner import COST_ADVANTAGES, PolicyOnBatch, TRPOLagTorchLearner
+from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
+from lac_rllib.constrained.metrics import COST_GAP, CPO_CASE, NU
+from lac_rllib.constrained.trust_region import (
+    EPS,
+    conjugate_gradient,
+    cpo_acceptance,
+    cpo_step,
+    fisher_vector_product,
+    flat_grad,
+)
+
+#: The learner's own entry in its checkpointed state: the window of episode lengths.
+STATE_KEY = "cpo"
+
+
+class CPOTorchLearner(TRPOLagTorchLearner):
+    @override(TRPOLagTorchLearner)
+    def build(self) -> None:
+        super().build()
+        self.episode_lengths = EpisodeLengths()
+        if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
+            self._learner_connector.prepend(self.episode_lengths)  # before the phantom step is appended
+        # The episodes' lengths, over the same episodes as the cost window (c's scale [S]).
+        self.length_windows = {mid: collections.deque(maxlen=self.config.get_config_for_module(mid).cost_window)
+                               for mid in self.module.keys()}
+
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
+        """No multiplier: ν pinned at 0 (a zero step), so PPO-Lag's bookkeeping of Ĵ_C runs as it is."""
+        config = self.config.get_config_for_module(module_id)
+        return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit,
+                                  rule=GradientStep(0.0), bounded=False)
+
+    def policy_advantages(self, config, module, batch) -> torch.Tensor:
+        """The reward surrogate's advantage: A^R alone [O CPO._update_actor: adv_r]."""
+        return batch[Postprocessing.ADVANTAGES]
+
+    def policy_step(self, module_id, config, module, policy: PolicyOnBatch):
+        """CPO's step (the module docstring); returns the line search's result, KL̄ and the loss after."""
+        reward_adv, cost_adv = policy.whole[Postprocessing.ADVANTAGES], policy.whole[COST_ADVANTAGES]
+        max_kl = policy.max_kl(config)
+
+        def loss() -> torch.Tensor:
+            return -policy.surrogate(reward_adv)
+
+        def cost() -> torch.Tensor:
+            return policy.surrogate(cost_adv)
+
+        loss_old, cost_old = loss(), cost()
+        g, b = -flat_grad(loss_old, policy.params), flat_grad(cost_old, policy.params)
+        fvp = fisher_vector_product(policy.mean_kl, policy.params, config.cg_damping)
+        x, p = conjugate_gradient(fvp, g, config.cg_iters), conjugate_gradient(fvp, b, config.cg_iters)
+        c = self.cost_gap(module_id, config)
+        step, nu, case, logs = self.constrained_step(config, g, b, x, p, c, max_kl, float(x @ fvp(x)))
+        accept = cpo_acceptance(loss, cost, policy.mean_kl, float(loss_old.detach()), float(cost_old.detach()), c,
+                                max_kl, case)
+        self.metrics.log_dict({NU: nu, COST_GAP: c if math.isfinite(c) else float("nan"), **logs},
+                              key=module_id, window=1)
+        return self.search(policy, step, accept, config, loss)
+
+    def constrained_step(self, config, g, b, x, p, c, max_kl, q):
+        """(Δθ, ν, the case the line search tests, values to log): CPO's [CPO App. 10.2; O cpo.py:215-338]."""
+        out = cpo_step(g, b, x, p, c, max_kl, q=q, convention=config.dual_convention)
+        return out.step_direction, out.nu, out.case, {CPO_CASE: out.case}
+
+    def cost_gap(self, module_id, config) -> float:
+        """c = Ĵ_C − d over PPO-Lag's cost window [O: EpCost's window], divided by the mean episode
+        length over the same episodes with cost_gap_scale="episode_length" [S: ``c /= (rescale +
+        EPS)``, its EpLen]; −∞ with no episode completed yet."""
+        lengths = self.length_windows[module_id]
+        if lengths.maxlen is None:  # cost_window None: this iteration's episodes only [S]
+            lengths.clear()
+        lengths.extend(self.episode_lengths.lengths)
+        costs = self.cost_windows[module_id]
+        scaled = config.cost_gap_scale == "episode_length"
+        if not costs or (scaled and not lengths):
+            return -math.inf
+        c = sum(costs) / len(costs) - config.effective_cost_limit
+        return c / (sum(lengths) / len(lengths) + EPS) if scaled else c
+
+    # ----- state: the length window beside PPO-Lag's -----
+    @override(TRPOLagTorchLearner)
+    def get_state(self, *args, **kwargs):
+        state = super().get_state(*args, **kwargs)
+        state[STATE_KEY] = {mid: list(window) for mid, window in self.length_windows.items()}
+        return state
+
+    @override(TRPOLagTorchLearner)
+    def set_state(self, state) -> None:
+        super().set_state(state)
+        for mid, lengths in state.get(STATE_KEY, {}).items():
+            self.length_windows[mid].clear()
+            self.length_windows[mid].extend(lengths)
