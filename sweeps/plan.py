@@ -50,6 +50,8 @@ class Plan:
     confirms: tuple | None = None
     #: A user's algorithm (its import path) → the folder its trials import it from (registry.module_dir).
     user_algos: dict = dataclasses.field(default_factory=dict)
+    #: (factor, what it came from): this machine's speed against the rates' (sweeps/calibration.py).
+    calibration: tuple = (1.0, "the rates as measured")
 
     @property
     def task(self) -> str | None:

@@ -29,6 +29,7 @@ from lac_rllib.algorithms.registry import (
     plan_update_s,
 )
 from sweeps import spaces, sweep_file
+from sweeps.calibration import machine_factor
 from sweeps.lock import DriverLock, SweepLocked
 from sweeps.plan import Infra, Plan
 from sweeps.record import SWEEP_FILE, resume_differences
@@ -244,7 +245,9 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     # search: each sampled configuration is trained with every seed (sweeps/sweep.py, SeedRepeater)
     n_trials = len(trials) if trials is not None else sweep.num_samples * len(seeds)
     concurrency = min(sweep.max_concurrent or max(1, (os.cpu_count() or 1) // cpus), n_trials)
-    per_trial = [estimate_trial_s(t.task, t.timesteps, t.params, cpus) for t in trials or first * n_trials]
+    calibration = machine_factor(infra.tracking_uri, sweep.experiment, nominal_trial_s)
+    per_trial = [calibration(t.algo) * estimate_trial_s(t.task, t.timesteps, t.params, cpus)
+                 for t in trials or first * n_trials]
     name = sweep.name
     optuna_storage = None
     if sweep.is_search:
@@ -254,6 +257,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
         n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=max(t.timesteps for t in first),
         estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
+        calibration=(calibration.factor, calibration.source),
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
         user_algos=user_algos(sweep),
     )
@@ -458,6 +462,20 @@ def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
     return STARTUP_S + (steps / RATE.get(preset, min(RATE.values())) + extra) / cpus ** 0.5
 
 
+def nominal_trial_s(params: dict) -> float | None:
+    """What the rates say an earlier trial (its MLflow params, as logged) took, to set against its
+    run's span (sweeps/calibration.py); None: not comparable."""
+    from sweeps.results import param_value
+    from sweeps.tracking import P_TASK, P_TIMESTEPS
+
+    try:
+        fields = {k: param_value(v) for k, v in params.items()}
+        cpus = int(fields.get("torch_threads", 1))  # a trial's threads are its CPUs (sweeps/trainable.py)
+        return estimate_trial_s(str(fields[P_TASK]), int(fields[P_TIMESTEPS]), fields, cpus)
+    except Exception:  # a run of another version, a task not registered here: leave it out
+        return None
+
+
 def estimate_wall_s(per_trial: list[float], concurrency: int) -> float:
     """Trials taken longest first onto ``concurrency`` slots (Tune starts them in grid order, so
     this is a floor when the longest come last)."""
@@ -482,8 +500,8 @@ def print_plan(plan: Plan) -> None:
     print(f"  env steps per trial: {plan.timesteps:,}   "
           f"concurrency: {plan.concurrency} x {sweep.cpus_per_trial} CPU"
           f"{'' if not infra.address else f' (cluster {infra.address} from {infra.address_from}: capped by its CPUs)'}")
-    print(f"  estimated wall time: ~{plan.estimated_wall_s / 60:.0f} min, "
-          f"{plan.estimated_cpu_h:.1f} CPU-hours (rough)")
+    print(f"  estimated wall time: ~{plan.estimated_wall_s / 60:.0f} min at {plan.concurrency} trials at a time, "
+          f"{plan.estimated_cpu_h:.1f} CPU-hours (rough; calibrated: {plan.calibration[1]})")
     if plan.estimated_wall_s > 4 * 3600 and not infra.address:
         print("  too long for one machine? the same command runs on a Ray cluster: --address HEAD:PORT "
               "(set-up: docker/README.md)")
