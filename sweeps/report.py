@@ -439,19 +439,42 @@ def safety_markdown(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -
     worst iteration, the final cost's spread, and chain-health flags where there are any."""
     s = summary if "p_feasible" in summary else with_safety(summary, trials, curves)  # once per report
     lines = ["**Safety per configuration** (P(feasible at the end) with a Wilson 95% interval; violation = "
-             "Σ over iterations of max(0, cost − limit), mean over seeds; the worst iteration over its seeds):", "",
+             "Σ over iterations of max(0, cost − limit), mean over seeds; the worst iteration over its seeds; "
+             "during training: the cost rate (cost per env step), the env steps to the first feasible iteration "
+             "(mean over the seeds that got there) and the longest run of infeasible iterations):", "",
              "| group, configuration | P(feasible) [95%] | violation | worst iteration (excess @ env steps) "
-             "| final cost min–max | frontier | chain |", "|---|---:|---:|---:|---:|---|---|"]
+             "| final cost min–max | cost rate | steps to feasible | longest infeasible run | frontier | chain |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---|---|"]
     for r in s.to_dict("records"):
         p = "–" if _is_na(r.get("p_feasible")) else (f"{r['p_feasible']:.2f} [{r['p_feasible_low']:.2f}, "
                                                     f"{r['p_feasible_high']:.2f}]")
         worst = "–" if _is_na(r.get("worst_excess")) else f"{r['worst_excess']:+.2f} @ {r['worst_env_steps']:,.0f}"
         spread = "–" if _is_na(r.get("final_cost_min")) else f"{r['final_cost_min']:.2f}–{r['final_cost_max']:.2f}"
         what = f"{r['group']} {_what(r)}" if r["param"] else r["group"] + (" (default)" if r.get("is_default") else "")
-        cells = [what, p, _fmt_num(r.get("violation_total")), worst, spread,
-                 "yes" if r.get("on_frontier") else "", r.get("chain_flags") or ""]
+        never = int(r.get("never_feasible") or 0)
+        reach = "never" if _is_na(r.get("steps_to_feasible")) else f"{r['steps_to_feasible']:,.0f}"
+        reach += f" ({never} seed{'s' if never > 1 else ''} never)" if never and reach != "never" else ""
+        run = "–" if _is_na(r.get("longest_infeasible")) else f"{r['longest_infeasible']:.0f} iterations"
+        cells = [what, p, _fmt_num(r.get("violation_total")), worst, spread, _fmt_rate(r.get("cost_rate")), reach,
+                 run, "yes" if r.get("on_frontier") else "", r.get("chain_flags") or ""]
         lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _fmt_rate(x) -> str:
+    """A cost per env step (small numbers: three significant digits)."""
+    return "–" if _is_na(x) else f"{x:.3g}"
+
+
+def nothing_feasible_markdown(summary: pd.DataFrame) -> str:
+    """When no configuration's mean cost is within the limit, a line saying so and naming the least
+    infeasible one (the smallest mean cost over its limit), to lead the note; "" otherwise."""
+    ok = summary[summary["cost_mean"].notna()]
+    if ok.empty or ok["mean_feasible"].astype(bool).any():
+        return ""
+    least = ok.loc[(ok["cost_mean"] - ok["cost_limit"]).idxmin()]
+    return (f"**Nothing is feasible**: no configuration's mean cost is within its limit. The least infeasible: "
+            f"{_describe(least.to_dict())}, {_fmt_num(least['cost_mean'] - least['cost_limit'])} over.")
 
 
 def importance_markdown(trials: pd.DataFrame, fields: tuple[str, ...]) -> str:

@@ -16,6 +16,7 @@ from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from lac_rllib.constrained.metrics import (
     ACTOR_STD_MEAN,
     COST_LIMIT,
+    COST_RATE,
     EPISODE_COST,
     EPISODE_RETURN,
     FEASIBLE,
@@ -68,7 +69,7 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
                      if run.info.status == "FINISHED" else "ERROR",
                      **{k: m.get(k, float("nan")) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE,
-                                                            OBJECTIVE, *CHAIN_FINAL)},
+                                                            OBJECTIVE, COST_RATE, *CHAIN_FINAL)},
                      **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
                                                        *fields) if k in p}})
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
@@ -84,7 +85,14 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     """The report on the parent run (``summary/``) and the note that leads it; the parent closed."""
     from mlflow.entities import Metric
 
-    from sweeps.report import algorithm_comparison, note_markdown, parent_metrics, summarize, write_sweep_reports
+    from sweeps.report import (
+        algorithm_comparison,
+        note_markdown,
+        nothing_feasible_markdown,
+        parent_metrics,
+        summarize,
+        write_sweep_reports,
+    )
     from sweeps.table import table_markdown, write_table_report
 
     fields = swept_fields(plan) if plan is not None else ()
@@ -115,6 +123,9 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
                     ) or algorithm_comparison(summary)
             if lead:
                 note = note.replace(heading, heading + "\n\n" + lead, 1)[:7990]
+            nothing = nothing_feasible_markdown(summary)
+            if nothing:  # said first, before any table (issue 36)
+                note = note.replace(heading, heading + "\n\n" + nothing, 1)[:7990]
             # The runs table sorts and charts sweeps by these (docs/sweeps.md, "The parent run").
             tracker.client.log_batch(parent, metrics=[Metric(k, v, int(time.time() * 1000), 0)
                                                       for k, v in parent_metrics(summary).items()])

@@ -21,6 +21,8 @@ from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, LEARNER_RESULTS, NUM_ENV
 
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
+    COST_RATE,
+    COST_TOTAL,
     ENV_STEPS,
     EPISODE_COST,
     EPISODE_RETURN,
@@ -127,9 +129,13 @@ class SafeAlgorithm(Algorithm):
         ret, cost = self._last_episode_stats
         limit = self.config.effective_cost_limit
         nu = self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, NU), default=float("nan"))
+        steps = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
+        # The training's cost so far, a lifetime sum in RLlib's metrics (checkpointed with them).
+        self.metrics.log_value(COST_TOTAL, float(sum(costs)), reduce="lifetime_sum")
+        total = self.metrics.peek(COST_TOTAL, default=0.0)
         for key, value in {
             EPISODE_RETURN: ret, EPISODE_COST: cost, COST_LIMIT: limit,
             FEASIBLE: float(cost <= limit), NU: float(nu), EPISODES_THIS_ITER: len(returns),
-            ENV_STEPS: self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0),
+            ENV_STEPS: steps, COST_RATE: float(total) / steps if steps else float("nan"),
         }.items():
             self.metrics.log_value(key, value, window=1)

@@ -25,8 +25,11 @@ FEASIBLE = "feasible"  # 1.0 when episode_cost <= cost_limit
 NU = "nu"  # the Lagrange multiplier (the learner logs it per module under the same key)
 EPISODES_THIS_ITER = "episodes_this_iter"
 ENV_STEPS = "env_steps"  # lifetime env steps sampled
+# Training-time safety (Eckel et al. 2024): the cost of every episode completed so far (as the task
+# counts it) over the env steps sampled so far, and that total itself (its lifetime sum, checkpointed).
+COST_RATE, COST_TOTAL = "cost_rate", "cost_total"
 #: The top-level values of an iteration's row.
-TOP_LEVEL_KEYS = (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS)
+TOP_LEVEL_KEYS = (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE, NU, ENV_STEPS, COST_RATE)
 
 # ----- Learner results, per module; the last minibatch's value unless noted -----
 CRITIC_LOSS, ACTOR_LOSS = "critic_loss", "actor_loss"  # LAC: L_Q (eq. 12), L_A (eqs. 15-16)

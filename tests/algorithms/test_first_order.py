@@ -14,7 +14,7 @@ from ray.rllib.core.columns import Columns
 from lac_rllib.algorithms import registry
 from lac_rllib.algorithms.ppo_lag import algorithm as ppo_lag_algorithm
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.metrics import EPISODE_COST, EPISODE_RETURN, NU
+from lac_rllib.constrained.metrics import COST_RATE, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU
 
 FIRST_ORDER = ("focops", "cup", "p3o", "respo")
 TRUST_REGION = ("trpo_lag", "cpo", "pcpo")
@@ -60,6 +60,8 @@ def test_every_train_row_carries_its_own_cost(ray_session, monkeypatch, algo):
         np.testing.assert_array_equal(b[Columns.REWARDS][real], -t[real])
         assert not b[COSTS][~real].any(), "the phantom row repeats the last info; its cost must be 0"
     assert result[EPISODE_COST] == 49.0 and result[EPISODE_RETURN] == -21.0 and np.isfinite(result[NU])
+    # The training's cost per env step: 49 per 7-step episode, the episodes not yet completed not counted.
+    assert 6.5 < result[COST_RATE] <= 7.0 and result[COST_RATE] == result["cost_total"] / result[ENV_STEPS]
 
 
 @pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)

@@ -202,3 +202,11 @@ def test_the_parent_runs_metrics_name_the_best_feasible_configuration_and_the_co
     per_task = report.parent_metrics(report.summarize(two))
     assert per_task["best_feasible_return/PointGoal1"] == pytest.approx(20.0)
     assert per_task["best_feasible_return/CarGoal1"] == pytest.approx(40.0) and "best_feasible_return" not in per_task
+
+
+def test_when_nothing_is_feasible_the_note_says_so_first_and_names_the_least_infeasible():
+    summary = report.summarize(hand_table(limit=0.5))  # every configuration over 0.5
+    line = report.nothing_feasible_markdown(summary)
+    assert line.startswith("**Nothing is feasible**") and "NI" in line and "0.50 over" in line, line
+    assert report.nothing_feasible_markdown(report.summarize(hand_table())) == ""  # something is: no line
+

@@ -44,6 +44,18 @@ def test_violation_sums_the_excess_and_finds_the_worst_iteration():
     assert v["worst_excess"] == pytest.approx(5.0) and v["worst_env_steps"] == 2000.0
 
 
+def test_training_time_safety_on_a_hand_made_curve():
+    """Eckel et al. (2024): the env steps to the first feasible iteration and the longest run of
+    infeasible ones (cost rate: the trial's own metric, averaged in the safety table)."""
+    v = safety.violation(curve([30.0, 40.0, 20.0, 26.0, 27.0, 28.0, 10.0, 30.0]))  # limit 25
+    assert v["steps_to_feasible"] == 3000.0  # the third iteration is the first within the limit
+    assert v["longest_infeasible"] == 3  # 26, 27, 28 in a row (30, 40 before: 2; 30 at the end: 1)
+    never = safety.violation(curve([26.0, 30.0]))
+    assert math.isnan(never["steps_to_feasible"]) and never["longest_infeasible"] == 2
+    always = safety.violation(curve([1.0, 2.0]))
+    assert always["steps_to_feasible"] == 1000.0 and always["longest_infeasible"] == 0
+
+
 def test_violation_of_a_safe_run_and_of_no_run():
     v = safety.violation(curve([10.0, 20.0, 15.0]))
     assert v["violation_total"] == 0.0 and v["violation_mean"] == 0.0 and v["violating_iterations"] == 0
@@ -56,7 +68,8 @@ def test_violation_of_a_safe_run_and_of_no_run():
 def _trial(tid, value, seed, cost, status="TERMINATED", ret=1.0, limit=25.0):
     return dict(trial_id=tid, group="VT", param="langevin_steps", value=value, task="PointGoal1",
                 config=f"VT-langevin_steps={value}", seed=seed, status=status, episode_return=ret,
-                episode_cost=cost, cost_limit=limit, feasible=float(cost <= limit), objective=ret)
+                episode_cost=cost, cost_limit=limit, feasible=float(cost <= limit), objective=ret,
+                cost_rate=cost / 1000)
 
 
 def test_safety_table_per_configuration():
@@ -80,6 +93,9 @@ def test_safety_table_per_configuration():
     assert (a["worst_excess"], a["worst_env_steps"], a["worst_trial_id"]) == (15.0, 1000.0, "a0")
     assert a["final_cost_std"] == pytest.approx(np.std([20, 24, 30], ddof=1))
     assert (a["final_cost_min"], a["final_cost_max"]) == (20.0, 30.0)
+    # a0 feasible at 2000, a1 at 3000, a2 never: the mean over the seeds that got there, one never
+    assert (a["steps_to_feasible"], a["never_feasible"], a["longest_infeasible"]) == (2500.0, 1, 2)
+    assert a["cost_rate"] == pytest.approx(np.mean([0.02, 0.024, 0.03]))
     b = t.iloc[1]
     assert (b["n_seeds"], b["n_feasible"], b["p_feasible"]) == (1, 0, 0.0)
     assert math.isnan(b["violation_total"]) and math.isnan(b["final_cost_std"]) and pd.isna(b["worst_trial_id"])
