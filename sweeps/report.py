@@ -36,6 +36,7 @@ from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
 from sweeps.configurations import is_na as _is_na  # noqa: E402
 from sweeps.configurations import prepared as _prepared  # noqa: E402
 from sweeps.configurations import value_key as _value_key  # noqa: E402
+from sweeps.score import DESCRIPTION as SCORE_DESCRIPTION  # noqa: E402
 from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 
 STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
@@ -165,7 +166,8 @@ def markdown_table(summary: pd.DataFrame) -> str:
         lines.append("| " + " | ".join(cell(c) for c in cols) + " |")
     best = best_configuration(summary)
     comparison = algorithm_comparison(summary)
-    lines += ["", seeds_line([int(n) for n in summary["n_seeds"] if n]), ""] + ([comparison] if comparison else [])
+    lines += ["", f"Scores: {SCORE_DESCRIPTION}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
+    lines += [comparison] if comparison else []
     lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
                  "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)")
     return "\n".join(lines) + "\n"
@@ -219,7 +221,7 @@ def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: 
         head += [extra, ""]
     if one_task:
         head += [f"Task `{tasks[0]}`; final return and cost per configuration over its seeds:", ""]
-    head += [seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
+    head += [f"Scores: {SCORE_DESCRIPTION}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
     cols = "| group | configuration | " + ("" if one_task else "task | ") + "seeds | " + STAT_HEADER + " |"
     rows = [cols, "|" + "---|" * (cols.count("|") - 1)]
     for r in summary.to_dict("records"):

@@ -6,6 +6,7 @@ a multi-objective search's Pareto set, a confirmation's verdict) and the note th
 from __future__ import annotations
 
 import json
+import math
 import tempfile
 import time
 from pathlib import Path
@@ -23,7 +24,8 @@ from lac_rllib.constrained.metrics import (
     LANGEVIN_AT_BOUND,
     LANGEVIN_CLIP_FRACTION,
 )
-from sweeps.objective import OBJECTIVE
+from sweeps.objective import OBJECTIVE, objective
+from sweeps.score import LAST_COST, LAST_RETURN, train_score
 from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
@@ -73,7 +75,21 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                      **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
                                                        *fields) if k in p}})
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
+        rows[-1] = scored(rows[-1], curves[tid])
     return pd.DataFrame(rows), curves
+
+
+def scored(row: dict, curve) -> dict:
+    """A trial's row ranked on its score (sweeps/score.py): episode return and cost the means over
+    its final 10% of iterations, feasibility and the objective from them, the last iteration's
+    values kept as ``last_return`` / ``last_cost``. A trial without a curve keeps its last values."""
+    ret, cost = train_score(curve)
+    out = {**row, LAST_RETURN: row[EPISODE_RETURN], LAST_COST: row[EPISODE_COST]}
+    if math.isnan(ret) or math.isnan(cost):
+        return out
+    limit = row[COST_LIMIT]
+    return {**out, EPISODE_RETURN: ret, EPISODE_COST: cost, FEASIBLE: float(cost <= limit),
+            OBJECTIVE: objective(ret, cost, limit)}
 
 
 def varied(trials: pd.DataFrame, fields: tuple[str, ...]) -> list[str]:

@@ -27,6 +27,7 @@ from sweeps.objective import CONSTRAINT, OBJECTIVE, objective
 from sweeps.plan import Plan
 from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
 from sweeps.results import close_sweep
+from sweeps.score import SCORE_COST, SCORE_RETURN
 from sweeps.tracking import (
     STATUS_TAG,
     STOPPED_TAG,
@@ -81,7 +82,10 @@ class SeedRepeater(Repeater):
         group = self._trial_id_to_group.get(trial_id)
         if group is None:
             return
-        keys = (EPISODE_RETURN, EPISODE_COST, COST_LIMIT)
+        # The trial's score (sweeps/score.py: its final 10% of iterations), its last iteration's
+        # values where it has none (a trial of a version before the score).
+        keys = ((SCORE_RETURN, SCORE_COST, COST_LIMIT) if result and SCORE_RETURN in result
+                else (EPISODE_RETURN, EPISODE_COST, COST_LIMIT))
         ok = not error and result and all(k in result and math.isfinite(result[k]) for k in keys)
         group.report(trial_id, tuple(float(result[k]) for k in keys) if ok else (math.nan,) * 3)
         if not group.finished_reporting():

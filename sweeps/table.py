@@ -50,6 +50,7 @@ from sweeps.bounded_yaml import YamlRefused  # noqa: E402
 from sweeps.bounded_yaml import read as read_yaml  # noqa: E402
 from sweeps.bounded_yaml import read_text as read_yaml_text  # noqa: E402
 from sweeps.configurations import fmt_num, is_na, prepared  # noqa: E402
+from sweeps.score import DESCRIPTION as SCORE_DESCRIPTION  # noqa: E402
 from sweeps.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
 from sweeps.sweep_file import MAX_BUDGET, Int, KeyedError, Origin, Real, SafeName  # noqa: E402
 
@@ -417,7 +418,7 @@ def markdown(table: Table, budget_steps: int, budget_note: str = "", intervals: 
         lines += [row("", label, *(_figure_text(f, each) for f in figs))
                   for label, figs, each in _published_rows(table, task)]
     counts = [c.n_seeds for c in table.cells.values() if c.n_seeds]
-    lines += ["", legend_line(intervals), "", seeds_line(counts)]
+    lines += ["", legend_line(intervals), "", f"Scores: {SCORE_DESCRIPTION}. {seeds_line(counts)}"]
     if sources and _shown_figures(table):
         lines += ["", "Published figures:", *sources_lines(table)]
     return "\n".join(lines) + "\n"

@@ -9,6 +9,7 @@ NaN is marked FAILED in MLflow with the error before Tune marks it ERROR.
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import tempfile
@@ -33,6 +34,7 @@ from lac_rllib.tasks.user import register_definition
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.objective import CONSTRAINT, OBJECTIVE, WALL_TIME_S, objective
+from sweeps.score import SCORE_COST, SCORE_RETURN, train_score
 from sweeps.tracking import (
     ALGO_TAG,
     CHECKPOINT_TAG,
@@ -127,7 +129,11 @@ class SweepTrial(tune.Trainable):
                 self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
             done = metrics[ENV_STEPS] >= self.timesteps
             if done:
-                self._finish_run()
+                # Tune's last result (what Optuna is told) carries the trial's score (sweeps/score.py).
+                score = self._finish_run()
+                metrics.update(score)
+                if all(math.isfinite(v) for v in score.values()):
+                    metrics[OBJECTIVE] = objective(score[SCORE_RETURN], score[SCORE_COST], metrics[COST_LIMIT])
             return {**metrics, "done": done}
         except Exception as e:
             self.tracker.set_tags({ERROR_TAG: f"{type(e).__name__}: {e}"[:4000]})
@@ -135,8 +141,9 @@ class SweepTrial(tune.Trainable):
             self.tracker.finish("FAILED")
             raise
 
-    def _finish_run(self) -> None:
-        """Final checkpoint and learning curve as artifacts, then close the MLflow run."""
+    def _finish_run(self) -> dict:
+        """Final checkpoint and learning curve as artifacts, the trial's score (sweeps/score.py)
+        logged, then the MLflow run closed; returns the score."""
         from sweeps.report import trial_curve
 
         with tempfile.TemporaryDirectory() as tmp:
@@ -148,8 +155,13 @@ class SweepTrial(tune.Trainable):
             curve = learning_curve(self.tracker.client, self.tracker.run_id, self.algo_config.effective_cost_limit)
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
+        ret, cost = train_score(curve)
+        score = {SCORE_RETURN: ret, SCORE_COST: cost}
+        if math.isfinite(ret) and math.isfinite(cost):
+            self.tracker.log_metrics(score, step=int(curve[ENV_STEPS].max()))
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint"})
         self.tracker.finish("FINISHED")
+        return score
 
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         self.algo.save_to_path(checkpoint_dir)
