@@ -11,8 +11,24 @@ import torch
 
 def kl_to_reference(dist_cls, logits: torch.Tensor, reference_logits: torch.Tensor) -> torch.Tensor:
     """KL(π_θ(·|s) ‖ π_ref(·|s)) per row (B,): the policy's distribution inputs ``logits`` first,
-    the reference's (held fixed: no gradient flows into it) second."""
+    the reference's (held fixed: no gradient flows into it) second. A diagonal Gaussian's in closed
+    form on its inputs [mean, log σ] (:func:`gaussian_kl`: no distribution objects per minibatch),
+    any other distribution's by its ``kl``."""
+    if getattr(dist_cls, "__name__", "") == "TorchDiagGaussian":
+        return gaussian_kl(logits, reference_logits.detach())
     return dist_cls.from_logits(logits).kl(dist_cls.from_logits(reference_logits.detach()))
+
+
+def gaussian_kl(logits: torch.Tensor, reference_logits: torch.Tensor) -> torch.Tensor:
+    """KL(N(μ, σ²) ‖ N(μ_r, σ_r²)) summed over the action dimensions, from [μ, log σ] inputs:
+    ½·(σ²/σ_r² + (μ − μ_r)²/σ_r² − 1 − log(σ²/σ_r²)) per dimension, torch's Normal–Normal KL op for
+    op (what RLlib's TorchDiagGaussian.kl sums)."""
+    mean, log_std = logits.chunk(2, dim=-1)
+    ref_mean, ref_log_std = reference_logits.chunk(2, dim=-1)
+    scale, ref_scale = log_std.exp(), ref_log_std.exp()
+    var_ratio = (scale / ref_scale).pow(2)
+    t1 = ((mean - ref_mean) / ref_scale).pow(2)
+    return (0.5 * (var_ratio + t1 - 1 - var_ratio.log())).sum(-1)
 
 
 def within(kl: torch.Tensor, eta: float) -> torch.Tensor:
