@@ -55,8 +55,9 @@ from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 #: older formats it still reads, each with the keys renamed since (old name → current name).
 SUPPORTED_CHECKPOINT_FORMAT = CHECKPOINT_FORMAT
 OLDER_FORMATS = {2: {"lac_config": "algo_config"}}
-#: The mode every algorithm acts with (the others are their modules' own).
-GENERATOR = "generator"
+#: The modes every algorithm acts with (the others are their modules' own): its deterministic action
+#: (the mean), and a sample of its policy as the env runners drew them in training.
+GENERATOR, STOCHASTIC = "generator", "stochastic"
 #: The RLlib algorithm checkpoint's metadata file (``Algorithm.METADATA_FILE_NAME``).
 ALGO_METADATA_FILE = "rllib_checkpoint.json"
 #: Frames rendered per episode video at most (longer episodes are subsampled).
@@ -73,6 +74,7 @@ class Policy:
 
     module: Any                   # LACTorchRLModule, full (critics, targets, ν), eval mode
     env_to_module: Any            # EnvToModulePipeline (its MeanStdFilter frozen)
+    module_to_env: Any            # ModuleToEnvPipeline: sample, unsquash, clip (the stochastic mode); None: absent
     obs_filter: Any               # the frozen MeanStdFilter, or None (obs_normalization off)
     task_id: str
     algo_config: dict             # the algorithm's fields as saved (LACParams for LAC)
@@ -94,7 +96,8 @@ class Policy:
         """The action modes this policy can act with (the algorithm's ``ACTIONS``)."""
         from lac_rllib.algorithms.registry import algo_config
 
-        return tuple(algo_config(self.algo).ACTIONS)
+        own = tuple(algo_config(self.algo).ACTIONS)
+        return (*own[:1], *((STOCHASTIC,) if self.module_to_env is not None else ()), *own[1:])
 
     @property
     def action_low(self) -> np.ndarray:
@@ -247,6 +250,20 @@ def _restore_env_to_module(pipeline_dir: str):
     return pipeline, frozen
 
 
+def _restore_module_to_env(pipeline_dir: str):
+    """The env runner's module-to-env pipeline (it samples the action from the policy's
+    distribution, unsquashes and clips it, as in training), or None where a checkpoint has none."""
+    from ray.rllib.connectors.module_to_env.module_to_env_pipeline import ModuleToEnvPipeline
+
+    if not os.path.isdir(pipeline_dir):
+        return None
+    try:
+        return ModuleToEnvPipeline.from_checkpoint(pipeline_dir)
+    except Exception as e:  # connector unpickling/IO errors of every kind
+        raise CheckpointError(f"corrupt checkpoint: cannot restore the action pipeline from {pipeline_dir} "
+                              f"({one_line(e)})") from None
+
+
 def restore_policy(checkpoint_path: str) -> Policy:
     """Restore the LAC policy of an RLlib checkpoint (see the module docstring). No Ray."""
     from ray.rllib.core import (
@@ -254,6 +271,7 @@ def restore_policy(checkpoint_path: str) -> Policy:
         COMPONENT_ENV_TO_MODULE_CONNECTOR,
         COMPONENT_LEARNER,
         COMPONENT_LEARNER_GROUP,
+        COMPONENT_MODULE_TO_ENV_CONNECTOR,
         COMPONENT_RL_MODULE,
         DEFAULT_MODULE_ID,
     )
@@ -281,7 +299,9 @@ def restore_policy(checkpoint_path: str) -> Policy:
     if meta["algo_config"].get("obs_normalization", True) and obs_filter is None:
         raise CheckpointError(f"corrupt checkpoint: obs_normalization is on but {ckpt} holds no MeanStdFilter state")
     return Policy(
-        module=module, env_to_module=pipeline, obs_filter=obs_filter, task_id=meta["task_id"],
+        module=module, env_to_module=pipeline, module_to_env=_restore_module_to_env(
+            os.path.join(ckpt, COMPONENT_ENV_RUNNER, COMPONENT_MODULE_TO_ENV_CONNECTOR)),
+        obs_filter=obs_filter, task_id=meta["task_id"],
         algo_config=dict(meta["algo_config"]), cost_limit=float(meta["cost_limit"]),
         episode_cost_discount=float(meta["episode_cost_discount"]),
         env_config=dict(meta.get("env_config") or {}), checkpoint_path=ckpt, metadata=meta,
@@ -417,6 +437,19 @@ def _stats(values: list[float]) -> tuple[float, float]:
     return float(arr.mean()), float(arr.std())
 
 
+def _sampled_action(policy: Policy, obs: torch.Tensor, episode, shared: dict) -> torch.Tensor:
+    """A sample of the policy at ``obs`` as the env runners drew it in training: the module's
+    exploration forward, then the checkpoint's module-to-env pipeline (the action sampled from its
+    distribution, unsquashed onto the bounds and clipped where the config says)."""
+    from ray.rllib.core.columns import Columns
+
+    out = policy.module.forward_exploration({Columns.OBS: obs})
+    to_env = policy.module_to_env(rl_module=policy.module, batch=dict(out), episodes=[episode], explore=True,
+                                  shared_data=shared)
+    action = to_env.get(Columns.ACTIONS_FOR_ENV, to_env[Columns.ACTIONS])
+    return torch.as_tensor(np.asarray(action, dtype=np.float32)).reshape(1, -1)
+
+
 def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
              langevin_steps: int | None = None, langevin_step_size: float | None = None,
              video_dir: str | None = None, progress: bool = True) -> dict:
@@ -465,9 +498,11 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
     returns, costs, lengths = [], [], []
     diagnostics: dict[str, list[float]] = {}
     bar = _Progress(episodes, f"eval {actions}", progress)
+    rng_state = torch.random.get_rng_state()  # the stochastic mode seeds torch per episode; restored after
     try:
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
+            torch.manual_seed(seed + i)  # the stochastic mode's samples (RLlib's, from torch's global RNG)
             generator = torch.Generator().manual_seed(seed + i)  # a mode's noise (unused by "generator")
             episode = SingleAgentEpisode(observations=[obs], infos=[info],
                                          observation_space=policy.env_to_module.input_observation_space,
@@ -477,12 +512,15 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
             while not done:
                 if recorder is not None:
                     recorder.capture(t)
-                batch = policy.env_to_module(episodes=[episode], rl_module=module, explore=False,
-                                             shared_data={})
+                shared = {}  # what the env-to-module pipeline leaves for the module-to-env one (batch structure)
+                batch = policy.env_to_module(episodes=[episode], rl_module=module, explore=actions == STOCHASTIC,
+                                             shared_data=shared)
                 s = batch[Columns.OBS]
                 with torch.no_grad():
                     if actions == GENERATOR:
                         action = module.deterministic_action(s)
+                    elif actions == STOCHASTIC:
+                        action = _sampled_action(policy, s, episode, shared)
                     else:  # the module's own mode (ACTIONS)
                         action, diag = module.evaluation_action(s, actions, generator=generator, **options)
                         for name, value in diag.items():
@@ -504,6 +542,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
                     video_dir, f"episode_{i:03d}_seed_{seed + i}_{actions}"), fps / recorder.stride))
             bar.update(ret=f"{ret:.3g}", cost=f"{cost:.3g}")
     finally:
+        torch.random.set_rng_state(rng_state)
         bar.close()
         env.close()
 
@@ -519,7 +558,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
         "within_limit_fraction": float(np.mean([c <= limit for c in costs])),
         "videos": videos, "video_notice": video_notice,
     }
-    if actions != GENERATOR:
+    if actions not in (GENERATOR, STOCHASTIC):  # the module's own mode: what it ran with
         result.update(module.evaluation_info(actions, **options))
         result.update({f"{name}_mean": float(np.mean(values)) for name, values in diagnostics.items()})
     return result

@@ -33,7 +33,7 @@ from sweeps.tracking import (
     STOPPED_TAG,
     SweepTracker,
 )
-from sweeps.trainable import SweepTrial
+from sweeps.trainable import EVAL_EPISODES, SweepTrial
 
 METRIC, MODE = OBJECTIVE, "max"
 MULTI_OBJECTIVES = (EPISODE_RETURN, EPISODE_COST)  # a multi-objective search's, maximised and minimised
@@ -125,6 +125,7 @@ def worker_env(plan: Plan) -> dict | None:
 def param_space(plan: Plan, parent_run_id: str) -> dict:
     common = {
         "timesteps": plan.timesteps, "cpus": plan.sweep.cpus_per_trial, "user_tasks": plan.user_tasks,
+        "eval_episodes": EVAL_EPISODES if plan.sweep.eval_episodes is None else plan.sweep.eval_episodes,
         "user_algos": plan.user_algos,
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }

@@ -378,6 +378,10 @@ class SweepFile(BaseModel):
     """CPUs per trial: as many env runners sample and as many torch threads update; default 1."""
     experiment: Annotated[str, AfterValidator(_display_name)] | None = None
     """The MLflow experiment (default ``lac-sweeps``)."""
+    eval_episodes: Int(0, 1000) | None = None
+    """Episodes of the evaluation block at the end of every trial, run with the trained policy's
+    deterministic action and with its stochastic policy on env seeds no training episode used, logged
+    to the trial's run (``eval/<mode>/...``); 0 = none; default 10 (docs/sweeps.md)."""
 
     @field_validator("task", mode="before")
     @classmethod

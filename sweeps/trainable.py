@@ -13,6 +13,7 @@ import math
 import os
 import socket
 import tempfile
+import time
 import traceback
 
 import ray
@@ -55,6 +56,28 @@ from sweeps.tracking import (
     TrialTracker,
     learning_curve,
 )
+
+#: Episodes of the evaluation block at a trial's end unless the sweep file says (``eval_episodes``).
+EVAL_EPISODES = 10
+#: The evaluation block's env seeds start here, 1,000 per trial seed: far above the seeds RLlib
+#: gives the training envs (the trial's seed plus small offsets per env runner and env).
+EVAL_SEED_BASE = 2**30
+
+
+def eval_seed(seed: int) -> int:
+    """The first env seed of the evaluation block of a trial of ``seed`` (its episode i: + i)."""
+    return EVAL_SEED_BASE + 1_000 * int(seed)
+
+
+def evaluation_block(checkpoint: str, episodes: int, seed: int) -> list[dict]:
+    """The evaluation block (issue 36): ``episodes`` episodes of the checkpoint's policy with its
+    deterministic action and with its stochastic policy, on seeds :func:`eval_seed` on; one
+    ``lac_rllib.evaluation.evaluate`` result per mode."""
+    from lac_rllib.evaluation import GENERATOR, STOCHASTIC, evaluate, restore_policy
+
+    policy = restore_policy(checkpoint)
+    return [evaluate(policy, episodes, eval_seed(seed), mode, progress=False)
+            for mode in (GENERATOR, STOCHASTIC) if mode in policy.actions]
 
 
 class SweepTrial(tune.Trainable):
@@ -148,6 +171,7 @@ class SweepTrial(tune.Trainable):
 
         with tempfile.TemporaryDirectory() as tmp:
             self.algo.save_to_path(os.path.join(tmp, "checkpoint"))
+            self._evaluate(os.path.join(tmp, "checkpoint"))
             # The manifest goes to the tracking store, the files to the artifact store: a restore
             # checks one against the other (sweeps/integrity.py).
             self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
@@ -162,6 +186,22 @@ class SweepTrial(tune.Trainable):
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint"})
         self.tracker.finish("FINISHED")
         return score
+
+    def _evaluate(self, checkpoint: str) -> None:
+        """The evaluation block at the trial's end, logged to its run as ``eval/<mode>/...`` with
+        the seconds it took (``eval_time_s``); a failure is tagged, not raised: the trial trained."""
+        from sweeps.evaluate import log_eval_to_run
+
+        episodes = int(self.config.get("eval_episodes", EVAL_EPISODES))
+        if not episodes:
+            return
+        start = time.time()
+        try:
+            for result in evaluation_block(checkpoint, episodes, self.spec.seed):
+                log_eval_to_run(self.tracker.client, self.tracker.run_id, result)
+        except Exception as e:
+            self.tracker.set_tags({"lac.eval_error": f"{type(e).__name__}: {e}"[:4000]})
+        self.tracker.log_metrics({"eval_time_s": time.time() - start}, step=0)
 
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         self.algo.save_to_path(checkpoint_dir)

@@ -284,3 +284,65 @@ def test_bad_arguments(policy):
         evaluate(policy, 1, 0, actions="greedy")
     with pytest.raises(ValueError, match="episodes="):
         evaluate(policy, 0, 0)
+
+
+# ----------------------------------------------------------------------------- the stochastic mode
+
+
+def test_the_deterministic_mode_acts_with_the_mean_and_the_stochastic_one_samples(policy, monkeypatch):
+    """A stub mean: the env receives exactly it with actions='generator'; the stochastic mode's
+    actions are samples around the policy (not the stub), the same for the same seed."""
+    from lac_rllib.tasks.point_hazard import PointHazardEnv
+
+    seen = []
+    step = PointHazardEnv.step
+
+    def record(self, action):
+        seen.append(np.asarray(action, dtype=np.float64).copy())
+        return step(self, action)
+
+    monkeypatch.setattr(PointHazardEnv, "step", record)
+    stub = torch.tensor([[0.25, -0.5]])
+    monkeypatch.setattr(policy.module, "deterministic_action", lambda obs: stub.expand(len(obs), -1))
+    evaluate(policy, 1, seed=7, actions="generator", progress=False)
+    assert seen and all(np.allclose(a, [0.25, -0.5]) for a in seen)
+    seen.clear()
+    first = evaluate(policy, 2, seed=7, actions="stochastic", progress=False)
+    sampled = [a.copy() for a in seen]
+    assert not all(np.allclose(a, [0.25, -0.5]) for a in sampled) and len({tuple(a) for a in sampled}) > 1
+    seen.clear()
+    again = evaluate(policy, 2, seed=7, actions="stochastic", progress=False)
+    assert again["returns"] == first["returns"] and all(np.array_equal(a, b) for a, b in zip(sampled, seen))
+    assert "stochastic" in policy.actions and policy.actions[0] == "generator"
+
+
+def test_the_evaluation_blocks_env_seeds_are_disjoint_from_training(ray_session, monkeypatch, tmp_path):
+    """Every env reset of a trial's training and of its evaluation block, recorded: the block's
+    episodes start at eval_seed(seed) and share no seed with training; N episodes per mode."""
+    from lac_rllib.algorithms.registry import build_config
+    from lac_rllib.tasks.point_hazard import PointHazardEnv
+    from sweeps.trainable import eval_seed, evaluation_block
+
+    seeds = []
+    reset = PointHazardEnv.reset
+
+    def record(self, *, seed=None, options=None):
+        seeds.append(seed)
+        return reset(self, seed=seed, options=options)
+
+    monkeypatch.setattr(PointHazardEnv, "reset", record)
+    algo = build_config("ppo_lag", TASK, 3, {"train_batch_size_per_learner": 400, "minibatch_size": 100,
+                                             "num_epochs": 1, "num_envs_per_env_runner": 2},
+                        timesteps=1000).build_algo()  # env runner in this process: its resets recorded
+    try:
+        for _ in range(2):
+            algo.train()
+        path = algo.save_to_path(str(tmp_path / "ckpt"))
+    finally:
+        algo.stop()
+    training = {s for s in seeds if s is not None}
+    assert training, "the training envs were seeded"
+    seeds.clear()
+    results = evaluation_block(path, 3, seed=3)
+    assert [r["actions"] for r in results] == ["generator", "stochastic"] and all(r["episodes"] == 3 for r in results)
+    assert seeds == [eval_seed(3) + i for i in range(3)] * 2 and not training & set(seeds)

@@ -73,6 +73,13 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
     assert "...iteration" not in out
     assert {"ray", "torch", "mujoco", "numpy", "git_commit", "space", "seeds"} <= set(parent.data.params)
     assert parent.data.params["task"] == "lac/PointHazard-v0"  # resolved, not the CLI's None
+    # Every trial ended with its evaluation block: 10 episodes per mode on its own seeds, and its score.
+    for c in children:
+        m, tags = c.data.metrics, c.data.tags
+        assert {f"eval/{mode}/{k}" for mode in ("generator", "stochastic")
+                for k in ("return_mean", "cost_mean", "within_limit_fraction")} <= set(m), sorted(m)
+        assert tags["lac.eval.generator.episodes"] == tags["lac.eval.stochastic.episodes"] == "10"
+        assert "lac.eval_error" not in tags and m["eval_time_s"] > 0 and "score_return" in m
     summary = {a.path for a in client.list_artifacts(parent.info.run_id, "summary")}
     assert {"summary/summary.csv", "summary/summary.md", "summary/best.json", "summary/cost_boxplots.png",
             "summary/learning_curves.png", "summary/aggregates.png"} <= summary
