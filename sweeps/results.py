@@ -133,10 +133,12 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
                       "in the runs table to see one averaged curve per configuration).")
             note = note_markdown(summary, heading, footer, extra=note_extras(summary, trials, curves, fields, plan,
                                                                                pareto))
-            # The algorithms side by side lead the note: the table in the paper's layout where the
-            # sweep is one, else the comparison with LAC (MLflow cuts a tag at 8000 characters).
-            lead = (table_markdown(trials, budget_steps, budget_note(plan), limit=5000) if budget_steps else ""
-                    ) or algorithm_comparison(summary)
+            # The algorithms side by side lead the note (MLflow cuts a tag at 8000 characters): over
+            # several tasks the table in the paper's layout, with the published figures; on one task
+            # the comparison with LAC (P(LAC beats X); the table is in summary/table.md).
+            several = trials["task"].nunique() > 1
+            lead = (table_markdown(trials, budget_steps, budget_note(plan), limit=5000)
+                    if budget_steps and several else "") or algorithm_comparison(summary)
             if lead:
                 note = note.replace(heading, heading + "\n\n" + lead, 1)[:7990]
             nothing = nothing_feasible_markdown(summary)
