@@ -50,6 +50,8 @@ class Plan:
     confirms: tuple | None = None
     #: A user's algorithm (its import path) → the folder its trials import it from (registry.module_dir).
     user_algos: dict = dataclasses.field(default_factory=dict)
+    #: ``scheduler: asha``: (grace period in env steps, why, the rungs) (sweeps/scheduler.py); else None.
+    early_stopping: tuple | None = None
     #: (factor, what it came from): this machine's speed against the rates' (sweeps/calibration.py).
     calibration: tuple = (1.0, "the rates as measured")
 

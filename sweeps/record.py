@@ -19,6 +19,9 @@ SPEED_KEYS = ("max_concurrent", "cpus_per_trial", "description")
 #: What a sweep is beyond its file: --resume must be given the same values.
 IDENTITY_PLAN = ("tracking_uri", "timesteps", "n_trials", "optuna_storage")
 IDENTITY_INFRA = ("optuna_seed",)
+#: Keys a sweep recorded before they existed lacks: no difference on resume (its finished trials keep
+#: the score they were ranked on, their tag ``lac.score`` absent: ``train``; the report counts them).
+LATER_KEYS = ("score",)
 
 
 def sweep_record(plan, parent: str) -> dict:
@@ -41,6 +44,8 @@ def resume_differences(sweep_dir: Path, plan) -> list[str]:
         old = yaml.safe_load((sweep_dir / SWEEP_YAML).read_text()) or {}
         new = yaml.safe_load(plan.sweep.dump())
         for key in sorted(set(old) | set(new)):
+            if key in LATER_KEYS and key not in old:
+                continue
             if key not in SPEED_KEYS and old.get(key) != new.get(key):
                 diff.append(f"{key}={old.get(key)!r} (now {new.get(key)!r})")
     old_plan, old_infra = record.get("plan", {}), record.get("infra", {})

@@ -36,12 +36,12 @@ from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
 from sweeps.configurations import is_na as _is_na  # noqa: E402
 from sweeps.configurations import prepared as _prepared  # noqa: E402
 from sweeps.configurations import value_key as _value_key  # noqa: E402
-from sweeps.score import DESCRIPTION as SCORE_DESCRIPTION  # noqa: E402
+from sweeps.score import EVAL_COST, EVAL_RETURN, TRAIN_COST, TRAIN_RETURN, described  # noqa: E402
 from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 
 STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
          "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean", "is_default",
-         *STAT_COLUMNS]
+         *STAT_COLUMNS, "n_eval_scored", *(f"{c}_mean" for c in (TRAIN_RETURN, TRAIN_COST, EVAL_RETURN, EVAL_COST))]
 
 
 def _pm(mean, std) -> str:
@@ -69,10 +69,21 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
             mean_feasible=bool(cost.mean() <= limit),  # False when either side is NaN
             objective_mean=pd.to_numeric(ok["objective"], errors="coerce").mean(),
             is_default=bool(g["default"].any()),
+            # What the seeds were ranked on (sweeps/score.py), and both scores' means beside.
+            n_eval_scored=int(ok["score"].eq("eval").sum()) if "score" in ok else 0,
+            **{f"{c}_mean": pd.to_numeric(ok[c], errors="coerce").mean() if c in ok else float("nan")
+               for c in (TRAIN_RETURN, TRAIN_COST, EVAL_RETURN, EVAL_COST)},
             **seed_statistics(ret, cost, *(pd.to_numeric(base[c], errors="coerce") for c in
                                            (EPISODE_RETURN, EPISODE_COST)) if len(base) else (None, None))))
     rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"]))
     return pd.DataFrame(rows, columns=KEYS + STATS)
+
+
+def score_text(summary: pd.DataFrame) -> str:
+    """What the summary's configurations were ranked on (sweeps/score.py), from their seeds' counts."""
+    n_eval = int(pd.to_numeric(summary.get("n_eval_scored", 0), errors="coerce").fillna(0).sum())
+    n_all = int(pd.to_numeric(summary["n_seeds"], errors="coerce").fillna(0).sum())
+    return described(["eval"] * n_eval + ["train"] * (n_all - n_eval))
 
 
 def best_configuration(summary: pd.DataFrame) -> dict | None:
@@ -166,7 +177,7 @@ def markdown_table(summary: pd.DataFrame) -> str:
         lines.append("| " + " | ".join(cell(c) for c in cols) + " |")
     best = best_configuration(summary)
     comparison = algorithm_comparison(summary)
-    lines += ["", f"Scores: {SCORE_DESCRIPTION}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
+    lines += ["", f"Scores: {score_text(summary)}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
     lines += [comparison] if comparison else []
     lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
                  "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)")
@@ -221,7 +232,7 @@ def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: 
         head += [extra, ""]
     if one_task:
         head += [f"Task `{tasks[0]}`; final return and cost per configuration over its seeds:", ""]
-    head += [f"Scores: {SCORE_DESCRIPTION}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
+    head += [f"Scores: {score_text(summary)}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
     cols = "| group | configuration | " + ("" if one_task else "task | ") + "seeds | " + STAT_HEADER + " |"
     rows = [cols, "|" + "---|" * (cols.count("|") - 1)]
     for r in summary.to_dict("records"):

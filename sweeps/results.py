@@ -25,7 +25,19 @@ from lac_rllib.constrained.metrics import (
     LANGEVIN_CLIP_FRACTION,
 )
 from sweeps.objective import OBJECTIVE, objective
-from sweeps.score import LAST_COST, LAST_RETURN, train_score
+from sweeps.score import (
+    EVAL_COST,
+    EVAL_RETURN,
+    LAST_COST,
+    LAST_RETURN,
+    SCORE_TAG,
+    TRAIN,
+    TRAIN_COST,
+    TRAIN_RETURN,
+    declared,
+    eval_score,
+    train_score,
+)
 from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
@@ -75,16 +87,22 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                      **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
                                                        *fields) if k in p}})
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
-        rows[-1] = scored(rows[-1], curves[tid])
+        # The score the trial was ranked on when it ended (its tag); a run from before the tag: train.
+        rows[-1] = scored(rows[-1], curves[tid], m, run.data.tags.get(SCORE_TAG, TRAIN))
     return pd.DataFrame(rows), curves
 
 
-def scored(row: dict, curve) -> dict:
-    """A trial's row ranked on its score (sweeps/score.py): episode return and cost the means over
-    its final 10% of iterations, feasibility and the objective from them, the last iteration's
-    values kept as ``last_return`` / ``last_cost``. A trial without a curve keeps its last values."""
-    ret, cost = train_score(curve)
-    out = {**row, LAST_RETURN: row[EPISODE_RETURN], LAST_COST: row[EPISODE_COST]}
+def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> dict:
+    """A trial's row ranked on its score (sweeps/score.py): episode return and cost those of the
+    declared score ``kind`` (``eval``: the evaluation block's, read from the run's ``metrics``;
+    ``train``: the means over its final 10% of iterations), feasibility and the objective from
+    them; beside them both scores (``train_*``, ``eval_*``), the last iteration's values
+    (``last_*``) and ``score``, the one used (``train`` where an eval score is missing). A trial
+    with neither keeps its last values."""
+    train, evaluated = train_score(curve), eval_score(metrics or {})
+    (ret, cost), used = declared(kind, train, evaluated)
+    out = {**row, LAST_RETURN: row[EPISODE_RETURN], LAST_COST: row[EPISODE_COST], TRAIN_RETURN: train[0],
+           TRAIN_COST: train[1], EVAL_RETURN: evaluated[0], EVAL_COST: evaluated[1], "score": used}
     if math.isnan(ret) or math.isnan(cost):
         return out
     limit = row[COST_LIMIT]

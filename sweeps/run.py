@@ -248,6 +248,13 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     calibration = machine_factor(infra.tracking_uri, sweep.experiment, nominal_trial_s)
     per_trial = [calibration(t.algo) * estimate_trial_s(t.task, t.timesteps, t.params, cpus)
                  for t in trials or first * n_trials]
+    timesteps = max(t.timesteps for t in first)
+    early = None
+    if sweep.scheduler == "asha":  # per configuration, from the multipliers' warm-up (sweeps/scheduler.py)
+        from sweeps.scheduler import grace_period, milestones
+
+        grace, why = grace_period(trials or first, timesteps, sweep.grace_period)
+        early = (grace, why, tuple(milestones(grace, timesteps)))
     name = sweep.name
     optuna_storage = None
     if sweep.is_search:
@@ -255,7 +262,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         check_optuna_study(optuna_storage, name, infra.resume)
     return Plan(
         sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
-        n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=max(t.timesteps for t in first),
+        n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=timesteps, early_stopping=early,
         estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
         calibration=(calibration.factor, calibration.source),
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
@@ -323,6 +330,7 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     data.setdefault("seeds", {"count": 3, "start": 0})
     data.setdefault("searcher", "tpe" if base.is_search else "grid")
     data.setdefault("scheduler", "none")
+    data.setdefault("score", "train" if data.get("eval_episodes") == 0 else "eval")
     data.setdefault("cpus_per_trial", 1)
     data.setdefault("experiment", "lac-sweeps")
     if base.is_search:
@@ -497,6 +505,11 @@ def print_plan(plan: Plan) -> None:
     seed_text = f"seeds {seeds[0]}..{seeds[-1]}" if contiguous else f"seeds {list(seeds)}"
     what = f"{sweep.num_samples} Optuna {sweep.searcher.upper()} samples x " if sweep.is_search else ""
     print(f"  trials: {plan.n_trials}  ({what}{len(seeds)} seed(s) per configuration: {seed_text})")
+    episodes = sweep.eval_episodes if sweep.eval_episodes is not None else 10
+    print(f"  score: {sweep.score} ("
+          + (f"the trained policy's deterministic action over {episodes} held-out evaluation episodes"
+             if sweep.score == "eval" else "the mean over each trial's final 10% of training iterations")
+          + f"; evaluation block: {episodes or 'none'} episodes per trial and mode)")
     print(f"  env steps per trial: {plan.timesteps:,}   "
           f"concurrency: {plan.concurrency} x {sweep.cpus_per_trial} CPU"
           f"{'' if not infra.address else f' (cluster {infra.address} from {infra.address_from}: capped by its CPUs)'}")
@@ -505,6 +518,14 @@ def print_plan(plan: Plan) -> None:
     if plan.estimated_wall_s > 4 * 3600 and not infra.address:
         print("  too long for one machine? the same command runs on a Ray cluster: --address HEAD:PORT "
               "(set-up: docker/README.md)")
+    if plan.early_stopping:
+        grace, why, rungs = plan.early_stopping
+        print(f"  early stopping: ASHA per configuration (its seeds' mean objective at equal env steps; "
+              f"stopped or kept together); grace period {grace:,} env steps ({why}); rungs at "
+              f"{', '.join(f'{r:,}' for r in rungs) or 'none below the budget: nothing is stopped'}")
+        if len(plan.seeds) > plan.concurrency:
+            print(f"  ({len(plan.seeds)} seeds wait for each other at a rung: up to {len(plan.seeds)} trials are "
+                  f"live at once, {plan.concurrency} running)")
     print(f"  MLflow: {infra.tracking_uri}  experiment '{sweep.experiment}'")
     print(f"  Tune results: {plan.storage}/{plan.name}{'  (resuming)' if infra.resume else ''}")
     if plan.optuna_storage:

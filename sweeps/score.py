@@ -1,12 +1,19 @@
-"""What a sweep ranks a trial on: the mean over the final 10% of its iterations, not the last one.
+"""What a sweep ranks a trial on, declared by the sweep file's ``score`` key (issue 36):
 
-The last iteration's episode return and cost are the mean over the few episodes the stochastic
-policy completed in one iteration: one noisy sample of an exploring policy (issue 36; Eimer et al.
-2023, Hamilton et al. 2022 on single final samples). The score is the mean over the iterations in
-the final ``TAIL`` of the trial's env steps (those past (1 − TAIL) × its last env steps), as
-``docs/fidelity/`` scores runs (benchmarks/fidelity.py), at least the last iteration. The sweep's
-reports, its objective and feasibility, the frontier, the importances, the table and what Optuna is
-told all read it; the last iteration's values stay beside it (``last_return``, ``last_cost``).
+- ``eval`` (the default): the evaluation block at the trial's end (sweeps/trainable.py), the mean
+  return and cost of ``eval_episodes`` episodes of the trained policy's deterministic action on
+  env seeds no training episode used: the trained policy, not the exploring one;
+- ``train``: the mean over the iterations in the final ``TAIL`` of the trial's env steps (those
+  past (1 − TAIL) × its last env steps), as ``docs/fidelity/`` scores runs, at least the last
+  iteration.
+
+Never the last iteration alone: its return and cost are the mean over the few episodes the
+stochastic policy completed in one iteration, one noisy sample of an exploring policy (Eimer et al.
+2023, Hamilton et al. 2022 on single final samples). The reports, the objective and feasibility,
+the frontier, the importances, the confirmation, the table and what Optuna is told all read the
+declared score; the other score and the last iteration's values stay beside it (trials.csv,
+summary.csv). A trial whose evaluation failed or did not run is scored on ``train`` and says so
+(tag ``lac.score``; the reports count such trials).
 """
 
 from __future__ import annotations
@@ -17,15 +24,47 @@ import pandas as pd
 
 from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN
 
-#: The fraction of a trial's env steps, at its end, whose iterations its score averages.
+#: The fraction of a trial's env steps, at its end, whose iterations the train score averages.
 TAIL = 0.10
+EVAL, TRAIN = "eval", "train"
+#: What the sweep file's ``score`` accepts (the first is the default).
+SCORES = (EVAL, TRAIN)
+#: The evaluation mode the eval score reads: the deterministic action (sweeps/trainable.py runs it first).
+EVAL_MODE = "generator"
+#: The evaluation block's metrics the eval score reads (sweeps/evaluate.py logs them).
+EVAL_RETURN_KEY, EVAL_COST_KEY = f"eval/{EVAL_MODE}/return_mean", f"eval/{EVAL_MODE}/cost_mean"
 #: The final-iteration values a trial keeps beside its score (trials.csv, summary).
 LAST_RETURN, LAST_COST = "last_return", "last_cost"
-#: What a finished trial logs and reports as its score (MLflow metrics, Tune's last result).
+#: Each score's return and cost, kept beside the declared one (trials.csv, summary.csv, the trial's run).
+TRAIN_RETURN, TRAIN_COST = "train_return", "train_cost"
+EVAL_RETURN, EVAL_COST = "eval_return", "eval_cost"
+#: What a finished trial logs and reports as its declared score (MLflow metrics, Tune's last result).
 SCORE_RETURN, SCORE_COST = "score_return", "score_cost"
-#: How the reports say what they rank on.
-DESCRIPTION = (f"each trial's score is the mean of its episode return and cost over the iterations in its final "
-               f"{TAIL:.0%} of env steps (the last iteration's alone: `{LAST_RETURN}`, `{LAST_COST}` in trials.csv)")
+#: The tag a trial's run carries: the score it was ranked on (``eval`` or ``train``).
+SCORE_TAG = "lac.score"
+
+
+def description(kind: str, fallbacks: int = 0) -> str:
+    """How the reports say what they rank on (``kind``: the declared score; ``fallbacks``: trials
+    whose evaluation was missing, scored on ``train``)."""
+    train = f"the mean of its episode return and cost over the iterations in its final {TAIL:.0%} of env steps"
+    if kind == EVAL:
+        text = (f"each trial's score is its evaluation block's (`score: eval`): the mean return and cost of its "
+                f"trained policy's deterministic action over held-out episodes (the training score, {train}: "
+                f"`{TRAIN_RETURN}`, `{TRAIN_COST}` in trials.csv and summary.csv)")
+        if fallbacks:
+            text += f"; {fallbacks} trial(s) without an evaluation are scored on training"
+        return text
+    return (f"each trial's score is {train} (`score: train`; the evaluation block's: `{EVAL_RETURN}`, "
+            f"`{EVAL_COST}`; the last iteration's alone: `{LAST_RETURN}`, `{LAST_COST}` in trials.csv)")
+
+
+def described(used) -> str:
+    """:func:`description` for trials whose used scores are ``used`` (``eval`` / ``train`` each):
+    the eval score's when any trial was ranked on it, with the others counted."""
+    used = [u for u in used if isinstance(u, str)]
+    n_eval = sum(u == EVAL for u in used)
+    return description(EVAL, len(used) - n_eval) if n_eval else description(TRAIN)
 
 
 def train_score(curve: pd.DataFrame | None) -> tuple[float, float]:
@@ -39,3 +78,20 @@ def train_score(curve: pd.DataFrame | None) -> tuple[float, float]:
         tail = curve.tail(1)
     return (float(pd.to_numeric(tail[EPISODE_RETURN], errors="coerce").mean()),
             float(pd.to_numeric(tail[EPISODE_COST], errors="coerce").mean()))
+
+
+def eval_score(metrics: dict) -> tuple[float, float]:
+    """(return, cost) of the evaluation block's deterministic episodes in a run's ``metrics``; NaN
+    where the block did not run or failed."""
+    ret, cost = metrics.get(EVAL_RETURN_KEY), metrics.get(EVAL_COST_KEY)
+    if ret is None or cost is None:
+        return math.nan, math.nan
+    return float(ret), float(cost)
+
+
+def declared(kind: str, train: tuple[float, float], evaluated: tuple[float, float]) -> tuple[tuple[float, float], str]:
+    """((return, cost), the score used): the declared ``kind``'s, or ``train`` where an eval score
+    is asked and missing."""
+    if kind == EVAL and all(math.isfinite(v) for v in evaluated):
+        return evaluated, EVAL
+    return train, TRAIN

@@ -15,7 +15,6 @@ from pathlib import Path
 import optuna
 import ray
 from ray import tune
-from ray.tune.schedulers import ASHAScheduler
 from ray.tune.search import Repeater
 from ray.tune.search.optuna import OptunaSearch
 
@@ -27,7 +26,8 @@ from sweeps.objective import CONSTRAINT, OBJECTIVE, objective
 from sweeps.plan import Plan
 from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
 from sweeps.results import close_sweep
-from sweeps.score import SCORE_COST, SCORE_RETURN
+from sweeps.scheduler import ConfigurationASHA
+from sweeps.score import SCORE_COST, SCORE_RETURN, SCORES
 from sweeps.tracking import (
     STATUS_TAG,
     STOPPED_TAG,
@@ -126,6 +126,7 @@ def param_space(plan: Plan, parent_run_id: str) -> dict:
     common = {
         "timesteps": plan.timesteps, "cpus": plan.sweep.cpus_per_trial, "user_tasks": plan.user_tasks,
         "eval_episodes": EVAL_EPISODES if plan.sweep.eval_episodes is None else plan.sweep.eval_episodes,
+        "score": plan.sweep.score or SCORES[0],
         "user_algos": plan.user_algos,
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
@@ -250,12 +251,18 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
         progress_reporter=LiveTable(plan.n_trials, plan.concurrency), verbose=1,
     )
     search = search_algorithm(plan)
-    scheduler = (ASHAScheduler(time_attr=ENV_STEPS, metric=METRIC, mode=MODE, max_t=plan.timesteps,
-                               grace_period=max(1, plan.timesteps // 4)) if sweep.scheduler == "asha" else None)
+    scheduler, live = None, plan.concurrency
+    if plan.early_stopping:  # a configuration's seeds decided together (sweeps/scheduler.py)
+        scheduler = ConfigurationASHA(time_attr=ENV_STEPS, metric=METRIC, mode=MODE, max_t=plan.timesteps,
+                                      grace_period=plan.early_stopping[0], seeds=len(plan.seeds))
+        # A seed paused at a rung stays live (Tune's limit counts it) until its siblings arrive:
+        # room for a whole configuration, or they would wait for each other forever. CPUs still
+        # bound how many run.
+        live = max(plan.concurrency, len(plan.seeds))
     return tune.Tuner(
         trainable, param_space=param_space(plan, parent),
         tune_config=tune.TuneConfig(num_samples=plan.n_trials if search else 1, search_alg=search,
-                                    scheduler=scheduler, max_concurrent_trials=plan.concurrency,
+                                    scheduler=scheduler, max_concurrent_trials=live,
                                     trial_name_creator=_trial_name),
         run_config=run_config,
     )

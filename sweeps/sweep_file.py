@@ -371,7 +371,11 @@ class SweepFile(BaseModel):
     num_samples: Int(1, MAX_SAMPLES) | None = None
     """Configurations a search samples (each trained with every seed); default 20."""
     scheduler: Literal["none", "asha"] | None = None
-    """``asha`` stops poor trials early (Tune's ASHA on the objective); default none."""
+    """``asha`` stops poor configurations early: asynchronous successive halving on a configuration's
+    seeds together, their mean objective at equal env steps (sweeps/scheduler.py); default none."""
+    grace_period: Int(1, MAX_BUDGET) | None = None
+    """Env steps before ``asha`` may stop a configuration (its first rung); default the longer of a
+    quarter of the budget and the multipliers' warm-up (the plan prints it)."""
     max_concurrent: Int(1, MAX_CPUS) | None = None
     """Trials at once (default: CPUs / cpus_per_trial)."""
     cpus_per_trial: Int(1, MAX_CPUS) | None = None
@@ -382,6 +386,10 @@ class SweepFile(BaseModel):
     """Episodes of the evaluation block at the end of every trial, run with the trained policy's
     deterministic action and with its stochastic policy on env seeds no training episode used, logged
     to the trial's run (``eval/<mode>/...``); 0 = none; default 10 (docs/sweeps.md)."""
+    score: Literal["eval", "train"] | None = None
+    """What every trial is ranked on (sweeps/score.py): ``eval``, the evaluation block's deterministic
+    episodes (default; ``train`` when ``eval_episodes`` is 0), or ``train``, the mean over its final
+    10% of training iterations; the other is kept beside it in trials.csv and summary.csv."""
 
     @field_validator("task", mode="before")
     @classmethod
@@ -419,6 +427,12 @@ class SweepFile(BaseModel):
 
     @model_validator(mode="after")
     def _shape(self):
+        if self.grace_period is not None and self.scheduler != "asha":
+            raise KeyedError(("grace_period",), f"grace_period {self.grace_period} without an early-stopping "
+                             "scheduler; accepted: with scheduler: asha")
+        if self.score == "eval" and self.eval_episodes == 0:
+            raise KeyedError(("score",), "score eval ranks on the evaluation block and eval_episodes is 0; "
+                             "accepted: eval_episodes >= 1, or score: train")
         if self.grid is not None and self.groups is not None:
             raise KeyedError(("groups",), "give grid or groups, not both (a grid is one group)")
         if self.grid == {} or self.groups == {}:

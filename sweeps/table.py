@@ -50,7 +50,7 @@ from sweeps.bounded_yaml import YamlRefused  # noqa: E402
 from sweeps.bounded_yaml import read as read_yaml  # noqa: E402
 from sweeps.bounded_yaml import read_text as read_yaml_text  # noqa: E402
 from sweeps.configurations import fmt_num, is_na, prepared  # noqa: E402
-from sweeps.score import DESCRIPTION as SCORE_DESCRIPTION  # noqa: E402
+from sweeps.score import described  # noqa: E402
 from sweeps.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
 from sweeps.sweep_file import MAX_BUDGET, Int, KeyedError, Origin, Real, SafeName  # noqa: E402
 
@@ -231,6 +231,7 @@ class Table:
     cells: dict
     limits: dict  #: task → its limit (the trials' median)
     published: Published
+    scores: tuple = ()  #: the score each counted trial was ranked on (sweeps/score.py)
 
     def name(self, algo: str) -> str:
         """The column's name: the paper's for its algorithms, else ours (a user's module path)."""
@@ -295,7 +296,8 @@ def build_table(trials: pd.DataFrame, pub: Published | None = None) -> Table | N
             top = round(max(c.ret[0] for c in feasible.values()), 2)
             for a, c in feasible.items():
                 cells[(task, a)] = dataclasses.replace(c, best=round(c.ret[0], 2) == top)
-    return Table(tuple(tasks), tuple(algos), cells, limits, pub)
+    scores = tuple(df.loc[~left_out, "score"]) if "score" in df else ()
+    return Table(tuple(tasks), tuple(algos), cells, limits, pub, scores)
 
 
 # ----------------------------------------------------------------------------- how it is written
@@ -418,7 +420,7 @@ def markdown(table: Table, budget_steps: int, budget_note: str = "", intervals: 
         lines += [row("", label, *(_figure_text(f, each) for f in figs))
                   for label, figs, each in _published_rows(table, task)]
     counts = [c.n_seeds for c in table.cells.values() if c.n_seeds]
-    lines += ["", legend_line(intervals), "", f"Scores: {SCORE_DESCRIPTION}. {seeds_line(counts)}"]
+    lines += ["", legend_line(intervals), "", f"Scores: {described(table.scores)}. {seeds_line(counts)}"]
     if sources and _shown_figures(table):
         lines += ["", "Published figures:", *sources_lines(table)]
     return "\n".join(lines) + "\n"

@@ -35,7 +35,17 @@ from lac_rllib.tasks.user import register_definition
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.objective import CONSTRAINT, OBJECTIVE, WALL_TIME_S, objective
-from sweeps.score import SCORE_COST, SCORE_RETURN, train_score
+from sweeps.score import (
+    SCORE_COST,
+    SCORE_RETURN,
+    SCORE_TAG,
+    SCORES,
+    TRAIN_COST,
+    TRAIN_RETURN,
+    declared,
+    eval_score,
+    train_score,
+)
 from sweeps.tracking import (
     ALGO_TAG,
     CHECKPOINT_TAG,
@@ -165,8 +175,9 @@ class SweepTrial(tune.Trainable):
             raise
 
     def _finish_run(self) -> dict:
-        """Final checkpoint and learning curve as artifacts, the trial's score (sweeps/score.py)
-        logged, then the MLflow run closed; returns the score."""
+        """Final checkpoint, evaluation block and learning curve as artifacts, the trial's declared
+        score (sweeps/score.py: the sweep's ``score``) and its train score logged, the score used
+        tagged, then the MLflow run closed; returns the declared score."""
         from sweeps.report import trial_curve
 
         with tempfile.TemporaryDirectory() as tmp:
@@ -179,11 +190,17 @@ class SweepTrial(tune.Trainable):
             curve = learning_curve(self.tracker.client, self.tracker.run_id, self.algo_config.effective_cost_limit)
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
-        ret, cost = train_score(curve)
+        train = train_score(curve)
+        try:  # the evaluation's metrics, logged above straight to the store
+            metrics = self.tracker.client.get_run(self.tracker.run_id).data.metrics
+        except Exception:  # the store away: ranked on train, and the tag says so
+            metrics = {}
+        (ret, cost), used = declared(self.config.get("score", SCORES[0]), train, eval_score(metrics))
         score = {SCORE_RETURN: ret, SCORE_COST: cost}
-        if math.isfinite(ret) and math.isfinite(cost):
-            self.tracker.log_metrics(score, step=int(curve[ENV_STEPS].max()))
-        self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint"})
+        logged = {k: v for k, v in {**score, TRAIN_RETURN: train[0], TRAIN_COST: train[1]}.items() if math.isfinite(v)}
+        if logged:
+            self.tracker.log_metrics(logged, step=int(curve[ENV_STEPS].max()))
+        self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint", SCORE_TAG: used})
         self.tracker.finish("FINISHED")
         return score
 

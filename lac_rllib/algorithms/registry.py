@@ -14,8 +14,11 @@ docs treat every algorithm alike:
   ``BUDGET_FIELDS`` (a sweep's named budget → task preset or ``"*"`` → the fields it sets: the
   smoke and quick sizes), ``benchmark_fields(benchmark, steps)`` (what benchmarks/update_step.py
   and iteration.py build it with), ``plan_update_s(params, preset)`` (the plan's estimate of its update
-  seconds per env step on one CPU), and on ``CONFIG_CLASS`` ``REPORTED_KEYS`` (the learner's values
-  an iteration's row carries) and ``TASK_FAMILY_OVERRIDES`` (fields per task family).
+  seconds per env step on one CPU), ``warmup_env_steps(params)`` (the env steps before its
+  multiplier can act on the policy: early stopping waits for them, sweeps/scheduler.py; an
+  algorithm without one gets its house's: :func:`declared`), and on ``CONFIG_CLASS``
+  ``REPORTED_KEYS`` (the learner's values an iteration's row carries) and ``TASK_FAMILY_OVERRIDES``
+  (fields per task family).
 
 A user's own algorithm is named by the import path of such a module (``mypkg.safe_algo``: a sweep
 file's ``algo: {module: mypkg.safe_algo}``, ``--algo`` of lac-train, ``--set algo=``): that path
@@ -191,6 +194,25 @@ def plan_update_s(algo: str, params: dict, preset: str) -> float:
     (its ``plan_update_s``; none declared: 0, the estimate is the sampling alone)."""
     estimate = getattr(algo_config(algo), "plan_update_s", None)
     return float(estimate(params, preset)) if estimate else 0.0
+
+
+def declared(algo: str, name: str, default=None):
+    """What ``algo``'s module declares as ``name``, else what its house declares (the algorithm it
+    extends: :func:`house`, and so on up), else ``default``."""
+    while algo is not None:
+        value = getattr(algo_config(algo), name, None)
+        if value is not None:
+            return value
+        algo = house(algo)
+    return default
+
+
+def warmup_env_steps(algo: str, params: dict) -> int:
+    """The env steps before ``algo``'s multiplier can act on its policy, for a trial's ``params``
+    (its own or its house's ``warmup_env_steps``; none declared: 0). Early stopping waits for it
+    (sweeps/scheduler.py)."""
+    warmup = declared(algo, "warmup_env_steps")
+    return int(warmup(params)) if warmup and params else 0
 
 
 def reported_keys(algo: str) -> tuple[str, ...]:

@@ -158,3 +158,13 @@ def test_ray_address_is_honoured_like_address_with_the_same_cluster_checks(tmp_p
     monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:9")
     with pytest.raises(ValueError, match="RAY_ADDRESS 127.0.0.1:9: cannot connect"):
         _plan(tmp_path, monkeypatch, "--space", "smoke")
+
+
+def test_a_sweep_ranks_on_its_evaluation_unless_it_runs_none(tmp_path, monkeypatch, capsys):
+    assert _plan(tmp_path, monkeypatch, "--space", "ablation").sweep.score == "eval"
+    f = tmp_path / "noeval.yaml"
+    f.write_text("task: lac/PointHazard-v0\nbudget: smoke\neval_episodes: 0\ngrid: {beta: [0.5, 1.0]}\n")
+    plan = _plan(tmp_path, monkeypatch, "--config", str(f))
+    assert plan.sweep.score == "train"
+    cli.print_plan(plan)
+    assert "score: train" in capsys.readouterr().out

@@ -38,3 +38,33 @@ def test_a_trial_whose_last_iteration_is_infeasible_ranks_as_its_final_tenth_say
     assert worse["feasible"] == 0.0 and worse["objective"] == pytest.approx(-1e6 - 5.0)
     # No curve: the last values stand.
     assert scored(row, None)["episode_cost"] == 30.0
+
+
+def test_under_score_eval_a_trial_ranks_on_its_evaluation_and_under_train_on_its_final_tenth():
+    """Its last iteration is infeasible (30 > 25) and so is its final 10% (mean 35); its evaluation
+    block is feasible (12): feasible under ``score: eval``, infeasible under ``score: train``, each
+    with the other score kept beside it."""
+    row = {"episode_return": 9.0, "episode_cost": 30.0, "cost_limit": 25.0, "feasible": 0.0, "objective": -1e6 - 5}
+    curve = _curve([10.0] * 18 + [40.0, 30.0], returns=[1.0] * 18 + [11.0, 9.0])
+    metrics = {score.EVAL_RETURN_KEY: 14.0, score.EVAL_COST_KEY: 12.0}
+    by_eval = scored(row, curve, metrics, score.EVAL)
+    assert (by_eval["episode_return"], by_eval["episode_cost"], by_eval["feasible"]) == (14.0, 12.0, 1.0)
+    assert by_eval["objective"] == 14.0 and by_eval["score"] == "eval"
+    assert (by_eval["train_return"], by_eval["train_cost"]) == (10.0, 35.0)
+    by_train = scored(row, curve, metrics, score.TRAIN)
+    assert (by_train["episode_cost"], by_train["feasible"], by_train["score"]) == (35.0, 0.0, "train")
+    assert by_train["objective"] < -1e5 and (by_train["eval_return"], by_train["eval_cost"]) == (14.0, 12.0)
+    # An eval score asked for and missing (the block failed or did not run): train, and it says so.
+    missing = scored(row, curve, {}, score.EVAL)
+    assert (missing["episode_cost"], missing["score"]) == (35.0, "train") and math.isnan(missing["eval_cost"])
+    assert "1 trial(s) without an evaluation" in score.described(["eval", "train", "eval"])
+    assert "score: train" in score.described(["train", "train"])
+
+
+def test_score_eval_without_evaluation_episodes_is_refused_and_no_score_then_means_train():
+    from sweeps import sweep_file
+
+    with pytest.raises(Exception, match="score eval ranks on the evaluation block"):
+        sweep_file.SweepFile.model_validate({"score": "eval", "eval_episodes": 0})
+    with pytest.raises(Exception, match="eval.*train"):
+        sweep_file.SweepFile.model_validate({"score": "last"})

@@ -80,6 +80,10 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
                 for k in ("return_mean", "cost_mean", "within_limit_fraction")} <= set(m), sorted(m)
         assert tags["lac.eval.generator.episodes"] == tags["lac.eval.stochastic.episodes"] == "10"
         assert "lac.eval_error" not in tags and m["eval_time_s"] > 0 and "score_return" in m
+        # Ranked on the evaluation (score: eval, the default), the training score logged beside it.
+        assert tags["lac.score"] == "eval" and m["score_return"] == m["eval/generator/return_mean"]
+        assert m["score_cost"] == m["eval/generator/cost_mean"] and "train_cost" in m
+    assert "Scores: each trial's score is its evaluation block's" in note, note
     summary = {a.path for a in client.list_artifacts(parent.info.run_id, "summary")}
     assert {"summary/summary.csv", "summary/summary.md", "summary/best.json", "summary/cost_boxplots.png",
             "summary/learning_curves.png", "summary/aggregates.png"} <= summary
@@ -403,21 +407,38 @@ def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monk
 
 
 @pytest.mark.slow
-def test_asha_early_stops_are_closed_and_called_stopped(ray_session, tmp_path):
+def test_asha_stops_a_configurations_seeds_together_after_the_grace_period(ray_session, tmp_path, capsys):
+    """Two configurations of 2 seeds, one of them certain to score low (a cost limit of 0: every
+    seed with a cost is infeasible), 2 trials at a time: its seeds stop together at the first rung,
+    which waits for the multiplier's warm-up; the other configuration's run to the end."""
     import pandas as pd
 
-    assert _sweep(tmp_path, _args(tmp_path, "--scheduler", "asha")) == 0
+    f = tmp_path / "asha.yaml"
+    f.write_text("task: lac/PointHazard-v0\nbudget: smoke\nseeds: 2\nscheduler: asha\neval_episodes: 2\n"
+                 "grid: {cost_limit: [1000.0, 0.0]}\n")
+    args = cli.parse_args(["--config", str(f), "--max-concurrent", "2", "--tracking-uri",
+                           f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results"),
+                           "--experiment", "test"])
+    plan = cli.make_plan(args)
+    grace, why, rungs = plan.early_stopping
+    # LAC's smoke warm-up: (1 random iteration + 1) × 500 env steps, longer than a quarter of 2,000.
+    assert (grace, rungs) == (1000, (1000,)) and "lac's multiplier warm-up" in why, plan.early_stopping
+    assert run_sweep(plan, Path(plan.storage) / plan.name, "test-commit") == 0
     client, parents, children = _runs(tmp_path)
-    assert children and not [c for c in children if c.info.status != "FINISHED"], "every run closed"
+    assert len(children) == 4 and not [c for c in children if c.info.status != "FINISHED"], "every run closed"
     last = {c.info.run_id: client.get_metric_history(c.info.run_id, "env_steps")[-1].step for c in children}
-    stopped = [c for c in children if last[c.info.run_id] < 2000]
-    assert stopped, "ASHA (reduction factor 4, 4 trials) should stop at least one trial at its first rung"
-    assert all(c.data.tags.get("lac.stopped_early") == "1" for c in stopped)
-    assert not any(c.data.tags.get("lac.stopped_early") for c in children if last[c.info.run_id] == 2000)
+    by_config = {}
+    for c in children:
+        by_config.setdefault(float(c.data.params["cost_limit"]), []).append(c)
+    low, high = by_config[0.0], by_config[1000.0]
+    assert [last[c.info.run_id] for c in low] == [1000, 1000], "both seeds stopped at the rung, none before"
+    assert all(c.data.tags.get("lac.stopped_early") == "1" for c in low)
+    assert [last[c.info.run_id] for c in high] == [2000, 2000]
+    assert not any(c.data.tags.get("lac.stopped_early") for c in high)
     trials = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/trials.csv", str(tmp_path)))
-    assert "ERROR" not in set(trials["status"]) and (trials["status"] == "STOPPED").sum() == len(stopped)
+    assert "ERROR" not in set(trials["status"]) and (trials["status"] == "STOPPED").sum() == 2
     summary = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/summary.csv", str(tmp_path)))
-    assert summary["n_stopped"].sum() == len(stopped) and summary["n_failed"].sum() == 0
+    assert summary["n_stopped"].sum() == 2 and summary["n_failed"].sum() == 0
 
 
 @pytest.mark.parametrize("extra,needle", [

@@ -317,6 +317,13 @@ def plan_update_s(params: dict, preset: str) -> float:
 
 
 
+def warmup_env_steps(params: dict) -> int:
+    """The random iterations and those before the first actor update, then one iteration: before
+    it ν's steps cannot reach the actor's actions (early stopping waits for them)."""
+    start = max(int(params["random_iterations"]), int(params["actor_update_start_iteration"]))
+    return (start + 1) * int(params["env_steps_per_iteration"])
+
+
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> LACConfig:
     """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed:

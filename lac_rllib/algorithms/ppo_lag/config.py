@@ -306,6 +306,12 @@ def plan_update_s(params: dict, preset: str) -> float:
     return 2e-4
 
 
+def warmup_env_steps(params: dict) -> int:
+    """ν steps once per iteration from the first, on that iteration's episodes; its first step
+    reaches the policy's update in the second: two iterations (early stopping waits for them)."""
+    return 2 * int(params["train_batch_size_per_learner"])
+
+
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> PPOLagConfig:
     """The PPOLagConfig a run of ``timesteps`` env steps uses (validated; no Ray needed:

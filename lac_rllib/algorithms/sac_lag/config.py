@@ -237,6 +237,11 @@ def plan_update_s(params: dict, preset: str) -> float:
     return 2e-3 * params.get("updates_per_env_step", 1.0)
 
 
+def warmup_env_steps(params: dict) -> int:
+    """λ takes no step before ``warmup_env_steps`` [O] (early stopping waits for it)."""
+    return int(params["warmup_env_steps"])
+
+
 def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1) -> SACLagConfig:
     """The SACLagConfig of a run on ``task`` (validated; no Ray needed:
