@@ -203,14 +203,15 @@ def resolve_checkpoint(args: argparse.Namespace, workdir: str) -> Resolved:
                     task_param=run.data.params.get(P_TASK))
 
 
-def log_eval_to_run(client, run_id: str, result: dict) -> list[str]:
-    """Log the evaluation back to the run as ``eval/<actions>/<key>`` metrics; return the keys."""
+def log_eval_to_run(client, run_id: str, result: dict, step: int = 0) -> list[str]:
+    """Log the evaluation back to the run as ``eval/<actions>/<key>`` metrics at ``step`` (a
+    sweep's trial: the env steps it was evaluated at); return the keys."""
     import time
 
     from mlflow.entities import Metric, RunTag
 
     mode, now = result["actions"], int(time.time() * 1000)
-    metrics = [Metric(f"{EVAL_PREFIX}/{mode}/{k}", float(result[k]), now, 0)
+    metrics = [Metric(f"{EVAL_PREFIX}/{mode}/{k}", float(result[k]), now, int(step))
                for k in LOGGED_KEYS if k in result and result[k] is not None]
     tags = [RunTag(f"lac.eval.{mode}.episodes", str(result["episodes"])),
             RunTag(f"lac.eval.{mode}.seed", str(result["seed"]))]

@@ -24,7 +24,7 @@ from lac_rllib.constrained.metrics import (
     LANGEVIN_AT_BOUND,
     LANGEVIN_CLIP_FRACTION,
 )
-from sweeps.objective import OBJECTIVE, objective
+from sweeps.objective import OBJECTIVE, WALL_TIME_S, objective
 from sweeps.score import (
     EVAL_COST,
     EVAL_RETURN,
@@ -56,6 +56,8 @@ from sweeps.tracking import (
 
 #: Where Optuna 5's ``trial.set_constraint`` keeps the constraint the sweep hands it (sweeps/sweep.py).
 OPTUNA_CONSTRAINT_KEY = "constraints:episode_cost_minus_limit"
+#: The seconds a trial's evaluation blocks took, all together (sweeps/trainable.py).
+EVAL_TIME_S = "eval_time_s"
 #: The final-iteration metrics the chain-health flags read (sweeps/chain_health.py).
 CHAIN_FINAL = (LANGEVIN_AT_BOUND, LANGEVIN_CLIP_FRACTION, ACTOR_STD_MEAN)
 
@@ -83,7 +85,8 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
                      if run.info.status == "FINISHED" else "ERROR",
                      **{k: m.get(k, float("nan")) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE,
-                                                            OBJECTIVE, COST_RATE, *CHAIN_FINAL)},
+                                                            OBJECTIVE, COST_RATE, *CHAIN_FINAL, EVAL_TIME_S,
+                                                            WALL_TIME_S)},
                      **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
                                                        *fields) if k in p}})
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
@@ -200,7 +203,22 @@ def note_extras(summary, trials, curves, fields, plan, pareto) -> str:
         parts.append(report.pareto_markdown(pareto))
     parts.append(report.importance_markdown(trials, tuple(varied(trials, fields))))
     parts.append(report.safety_markdown(summary, trials, curves))
+    parts.append(evaluation_share(trials))
     return "\n\n".join(p.strip() for p in parts if p)
+
+
+def evaluation_share(trials: pd.DataFrame) -> str:
+    """One line: what the evaluation blocks cost, their seconds against the trials' training
+    seconds (those that ran one); "" when none did."""
+    if EVAL_TIME_S not in trials or WALL_TIME_S not in trials:
+        return ""
+    ran = trials[pd.to_numeric(trials[EVAL_TIME_S], errors="coerce") > 0]
+    if ran.empty:
+        return ""
+    spent, trained = (pd.to_numeric(ran[c], errors="coerce").sum() for c in (EVAL_TIME_S, WALL_TIME_S))
+    share = spent / (spent + trained) if spent + trained > 0 else float("nan")
+    return (f"Evaluation blocks: {spent / len(ran):.1f} s per trial on average, {share:.0%} of the "
+            f"{len(ran)} trials' time (training {trained / len(ran):.1f} s per trial).")
 
 
 def pareto_set(plan) -> list[dict] | None:

@@ -249,6 +249,15 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     per_trial = [calibration(t.algo) * estimate_trial_s(t.task, t.timesteps, t.params, cpus)
                  for t in trials or first * n_trials]
     timesteps = max(t.timesteps for t in first)
+    if sweep.eval_modes:  # each mode must be one some algorithm of the sweep acts in
+        from lac_rllib.algorithms.registry import algo_config
+
+        accepted = ["generator", "stochastic", *dict.fromkeys(
+            m for a in dict.fromkeys(t.algo for t in trials or first) for m in algo_config(a).ACTIONS)]
+        for i, mode in enumerate(sweep.eval_modes):
+            if mode not in accepted:
+                raise ValueError(f"{origin(('eval_modes', i))}: {mode!r}; accepted with this sweep's algorithms: "
+                                 f"{', '.join(dict.fromkeys(accepted))}")
     early = None
     if sweep.scheduler == "asha":  # per configuration, from the multipliers' warm-up (sweeps/scheduler.py)
         from sweeps.scheduler import grace_period, milestones
@@ -506,10 +515,14 @@ def print_plan(plan: Plan) -> None:
     what = f"{sweep.num_samples} Optuna {sweep.searcher.upper()} samples x " if sweep.is_search else ""
     print(f"  trials: {plan.n_trials}  ({what}{len(seeds)} seed(s) per configuration: {seed_text})")
     episodes = sweep.eval_episodes if sweep.eval_episodes is not None else 10
+    modes = sweep.eval_modes or ["generator", "stochastic"]
     print(f"  score: {sweep.score} ("
           + (f"the trained policy's deterministic action over {episodes} held-out evaluation episodes"
              if sweep.score == "eval" else "the mean over each trial's final 10% of training iterations")
-          + f"; evaluation block: {episodes or 'none'} episodes per trial and mode)")
+          + (f"; evaluation block: {episodes} episodes x {', '.join(modes)} at each trial's end"
+             + (f" and every {sweep.eval_every} iterations" if sweep.eval_every else "")
+             + "; its share of the trials' time is in the sweep's note" if episodes else "; no evaluation block")
+          + ")")
     print(f"  env steps per trial: {plan.timesteps:,}   "
           f"concurrency: {plan.concurrency} x {sweep.cpus_per_trial} CPU"
           f"{'' if not infra.address else f' (cluster {infra.address} from {infra.address_from}: capped by its CPUs)'}")

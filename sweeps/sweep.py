@@ -127,6 +127,7 @@ def param_space(plan: Plan, parent_run_id: str) -> dict:
         "timesteps": plan.timesteps, "cpus": plan.sweep.cpus_per_trial, "user_tasks": plan.user_tasks,
         "eval_episodes": EVAL_EPISODES if plan.sweep.eval_episodes is None else plan.sweep.eval_episodes,
         "score": plan.sweep.score or SCORES[0],
+        "eval_modes": plan.sweep.eval_modes, "eval_every": plan.sweep.eval_every,
         "user_algos": plan.user_algos,
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }

@@ -37,6 +37,7 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    StringConstraints,
     Tag,
     ValidationError,
     ValidationInfo,
@@ -386,6 +387,14 @@ class SweepFile(BaseModel):
     """Episodes of the evaluation block at the end of every trial, run with the trained policy's
     deterministic action and with its stochastic policy on env seeds no training episode used, logged
     to the trial's run (``eval/<mode>/...``); 0 = none; default 10 (docs/sweeps.md)."""
+    eval_modes: list[Annotated[str, StringConstraints(pattern=r"^[a-z_]{1,40}$")]] | None = None
+    """The evaluation block's action modes (``lac-eval --actions``): ``generator`` (the deterministic
+    action, what ``score: eval`` reads), ``stochastic`` (the policy as it explored) and an
+    algorithm's own (LAC's ``langevin``); a trial runs those its algorithm has; default
+    [generator, stochastic]."""
+    eval_every: Int(1, MAX_BUDGET) | None = None
+    """Iterations between evaluation blocks during training (logged at their env steps: an
+    evaluation curve); default none: the block at the trial's end only."""
     score: Literal["eval", "train"] | None = None
     """What every trial is ranked on (sweeps/score.py): ``eval``, the evaluation block's deterministic
     episodes (default; ``train`` when ``eval_episodes`` is 0), or ``train``, the mean over its final
@@ -430,6 +439,12 @@ class SweepFile(BaseModel):
         if self.grace_period is not None and self.scheduler != "asha":
             raise KeyedError(("grace_period",), f"grace_period {self.grace_period} without an early-stopping "
                              "scheduler; accepted: with scheduler: asha")
+        if self.eval_episodes == 0 and (self.eval_every is not None or self.eval_modes is not None):
+            key = "eval_every" if self.eval_every is not None else "eval_modes"
+            raise KeyedError((key,), f"{key} with eval_episodes 0 (no evaluation); accepted: eval_episodes >= 1")
+        if self.eval_modes is not None and (not self.eval_modes or len(set(self.eval_modes)) != len(self.eval_modes)):
+            raise KeyedError(("eval_modes",), f"{excerpt(self.eval_modes)}: accepted: a non-empty list of distinct "
+                             "modes (generator, stochastic, an algorithm's own: LAC's langevin)")
         if self.score == "eval" and self.eval_episodes == 0:
             raise KeyedError(("score",), "score eval ranks on the evaluation block and eval_episodes is 0; "
                              "accepted: eval_episodes >= 1, or score: train")

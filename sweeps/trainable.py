@@ -79,15 +79,20 @@ def eval_seed(seed: int) -> int:
     return EVAL_SEED_BASE + 1_000 * int(seed)
 
 
-def evaluation_block(checkpoint: str, episodes: int, seed: int) -> list[dict]:
-    """The evaluation block (issue 36): ``episodes`` episodes of the checkpoint's policy with its
-    deterministic action and with its stochastic policy, on seeds :func:`eval_seed` on; one
-    ``lac_rllib.evaluation.evaluate`` result per mode."""
-    from lac_rllib.evaluation import GENERATOR, STOCHASTIC, evaluate, restore_policy
+#: The evaluation block's modes unless the sweep file says (``eval_modes``): deterministic, then stochastic.
+EVAL_MODES = ("generator", "stochastic")
+
+
+def evaluation_block(checkpoint: str, episodes: int, seed: int, modes=EVAL_MODES) -> list[dict]:
+    """The evaluation block (issue 36): ``episodes`` episodes of the checkpoint's policy in each of
+    ``modes`` it can act in (the deterministic action ``generator``, the stochastic policy
+    ``stochastic``, LAC's ``langevin``: lac-eval's ``--actions``), on seeds :func:`eval_seed` on;
+    one ``lac_rllib.evaluation.evaluate`` result per mode."""
+    from lac_rllib.evaluation import evaluate, restore_policy
 
     policy = restore_policy(checkpoint)
     return [evaluate(policy, episodes, eval_seed(seed), mode, progress=False)
-            for mode in (GENERATOR, STOCHASTIC) if mode in policy.actions]
+            for mode in modes if mode in policy.actions]
 
 
 class SweepTrial(tune.Trainable):
@@ -134,6 +139,8 @@ class SweepTrial(tune.Trainable):
         # Iterations replayed from the last checkpoint do not log steps MLflow already has, so
         # every metric history stays one point per step; the tag says where training picked up.
         self.logged_up_to = self.tracker.logged_up_to(ENV_STEPS)
+        # The evaluation blocks' seconds so far (a trial paused at a rung, or resumed, goes on counting).
+        self.eval_seconds = float(prev.data.metrics.get("eval_time_s", 0.0)) if prev else 0.0
         if self.logged_up_to and not self.already_finished:
             self.tracker.set_tags({"lac.resumed_after_env_steps": self.logged_up_to})
         # The node of the latest (re)start, and what rule-valued fields ("auto") resolved to there.
@@ -161,9 +168,14 @@ class SweepTrial(tune.Trainable):
             if metrics[ENV_STEPS] > self.logged_up_to:
                 self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
             done = metrics[ENV_STEPS] >= self.timesteps
+            every = int(self.config.get("eval_every") or 0)
+            if every and not done and (self.iteration + 1) % every == 0 and metrics[ENV_STEPS] > self.logged_up_to:
+                with tempfile.TemporaryDirectory() as tmp:  # the block every K iterations, on a snapshot
+                    self.algo.save_to_path(os.path.join(tmp, "checkpoint"))
+                    self._evaluate(os.path.join(tmp, "checkpoint"), int(metrics[ENV_STEPS]))
             if done:
                 # Tune's last result (what Optuna is told) carries the trial's score (sweeps/score.py).
-                score = self._finish_run()
+                score = self._finish_run(int(metrics[ENV_STEPS]))
                 metrics.update(score)
                 if all(math.isfinite(v) for v in score.values()):
                     metrics[OBJECTIVE] = objective(score[SCORE_RETURN], score[SCORE_COST], metrics[COST_LIMIT])
@@ -174,7 +186,7 @@ class SweepTrial(tune.Trainable):
             self.tracker.finish("FAILED")
             raise
 
-    def _finish_run(self) -> dict:
+    def _finish_run(self, env_steps: int) -> dict:
         """Final checkpoint, evaluation block and learning curve as artifacts, the trial's declared
         score (sweeps/score.py: the sweep's ``score``) and its train score logged, the score used
         tagged, then the MLflow run closed; returns the declared score."""
@@ -182,7 +194,7 @@ class SweepTrial(tune.Trainable):
 
         with tempfile.TemporaryDirectory() as tmp:
             self.algo.save_to_path(os.path.join(tmp, "checkpoint"))
-            self._evaluate(os.path.join(tmp, "checkpoint"))
+            self._evaluate(os.path.join(tmp, "checkpoint"), env_steps)
             # The manifest goes to the tracking store, the files to the artifact store: a restore
             # checks one against the other (sweeps/integrity.py).
             self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
@@ -204,9 +216,11 @@ class SweepTrial(tune.Trainable):
         self.tracker.finish("FINISHED")
         return score
 
-    def _evaluate(self, checkpoint: str) -> None:
-        """The evaluation block at the trial's end, logged to its run as ``eval/<mode>/...`` with
-        the seconds it took (``eval_time_s``); a failure is tagged, not raised: the trial trained."""
+    def _evaluate(self, checkpoint: str, step: int) -> None:
+        """An evaluation block, logged to the trial's run as ``eval/<mode>/...`` at env step
+        ``step`` (the final block at the last one, so it is what the run's metrics show), with the
+        seconds all blocks took so far (``eval_time_s``); a failure is tagged, not raised: the
+        trial trained."""
         from sweeps.evaluate import log_eval_to_run
 
         episodes = int(self.config.get("eval_episodes", EVAL_EPISODES))
@@ -214,11 +228,13 @@ class SweepTrial(tune.Trainable):
             return
         start = time.time()
         try:
-            for result in evaluation_block(checkpoint, episodes, self.spec.seed):
-                log_eval_to_run(self.tracker.client, self.tracker.run_id, result)
+            for result in evaluation_block(checkpoint, episodes, self.spec.seed,
+                                           tuple(self.config.get("eval_modes") or EVAL_MODES)):
+                log_eval_to_run(self.tracker.client, self.tracker.run_id, result, step=step)
         except Exception as e:
             self.tracker.set_tags({"lac.eval_error": f"{type(e).__name__}: {e}"[:4000]})
-        self.tracker.log_metrics({"eval_time_s": time.time() - start}, step=0)
+        self.eval_seconds += time.time() - start
+        self.tracker.log_metrics({"eval_time_s": self.eval_seconds}, step=step)
 
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         self.algo.save_to_path(checkpoint_dir)

@@ -168,3 +168,14 @@ def test_a_sweep_ranks_on_its_evaluation_unless_it_runs_none(tmp_path, monkeypat
     assert plan.sweep.score == "train"
     cli.print_plan(plan)
     assert "score: train" in capsys.readouterr().out
+
+
+def test_an_evaluation_mode_no_algorithm_of_the_sweep_has_is_refused_before_ray(tmp_path, monkeypatch):
+    f = tmp_path / "modes.yaml"
+    f.write_text("task: lac/PointHazard-v0\nbudget: smoke\nalgo: ppo_lag\neval_modes: [generator, langevin]\n")
+    with pytest.raises(ValueError, match=r"eval_modes.*'langevin'; accepted with this sweep's algorithms: "
+                                         r"generator, stochastic$"):
+        _plan(tmp_path, monkeypatch, "--config", str(f))
+    f.write_text("task: lac/PointHazard-v0\nbudget: smoke\neval_every: 2\neval_episodes: 0\n")
+    with pytest.raises(ValueError, match="eval_every with eval_episodes 0"):
+        _plan(tmp_path, monkeypatch, "--config", str(f))

@@ -415,7 +415,7 @@ def test_asha_stops_a_configurations_seeds_together_after_the_grace_period(ray_s
 
     f = tmp_path / "asha.yaml"
     f.write_text("task: lac/PointHazard-v0\nbudget: smoke\nseeds: 2\nscheduler: asha\neval_episodes: 2\n"
-                 "grid: {cost_limit: [1000.0, 0.0]}\n")
+                 "eval_every: 2\neval_modes: [generator, langevin]\ngrid: {cost_limit: [1000.0, 0.0]}\n")
     args = cli.parse_args(["--config", str(f), "--max-concurrent", "2", "--tracking-uri",
                            f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results"),
                            "--experiment", "test"])
@@ -435,6 +435,13 @@ def test_asha_stops_a_configurations_seeds_together_after_the_grace_period(ray_s
     assert all(c.data.tags.get("lac.stopped_early") == "1" for c in low)
     assert [last[c.info.run_id] for c in high] == [2000, 2000]
     assert not any(c.data.tags.get("lac.stopped_early") for c in high)
+    # The evaluation block every 2 iterations (an evaluation curve), in the modes the file asks.
+    for c in children:
+        for mode in ("generator", "langevin"):
+            steps = [m.step for m in client.get_metric_history(c.info.run_id, f"eval/{mode}/return_mean")]
+            assert steps == [1000, 2000][:len(steps)] and len(steps) == (1 if c in low else 2), (mode, steps)
+        assert "eval/stochastic/return_mean" not in c.data.metrics
+    assert "Evaluation blocks:" in parents[0].data.tags["mlflow.note.content"]
     trials = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/trials.csv", str(tmp_path)))
     assert "ERROR" not in set(trials["status"]) and (trials["status"] == "STOPPED").sum() == 2
     summary = pd.read_csv(client.download_artifacts(parents[0].info.run_id, "summary/summary.csv", str(tmp_path)))
