@@ -15,7 +15,8 @@ calls timed interleaved, in ms per gradient step of a call:
   random env steps.
 - the baselines built on one of those (the first-order ones on PPO-Lag's house: ``registry.house``):
   as their house, at its sizes (``benchmark_fields``: PPO-Lag's (64, 64) networks, 64-row
-  minibatches, 40 epochs), so the last column times their step against their house's on the same
+  minibatches, 40 epochs), so the last column times their step against their house's fused step,
+  built beside it and timed in the same interleaved repeats, on the same
   shapes (their maths differs from PPO-Lag's in the policy's loss only). Their RLlib path runs
   their own loss too.
 Beside them, :mod:`reference_steps`' plain-torch step on minibatches of the same shapes (its loss
@@ -36,6 +37,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PATHS = ("rllib", "fused")
+HOUSE = "house"  # a baseline built on another's house: that house's fused step, timed beside it
 
 
 def _build(algo: str, task: str, path: str, steps: int):
@@ -121,16 +123,18 @@ def main(argv=None) -> int:
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     lines = ["| algorithm | RLlib's path | fused | plain torch | matmul floor | RLlib / fused | fused / plain "
              "| fused / floor | fused / its house's fused |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    fused_ms = {}
     for name in args.algos.split(","):
         reference = name in reference_steps.STEPS
         algos = {path: _build(name, args.task, path, args.steps) for path in PATHS}
+        base = built_on.get(name)
+        if base:  # its house's fused step, timed in the same interleaved repeats: the ratio holds on a busy machine
+            algos[HOUSE] = _build(base, args.task, "fused", args.steps)
         try:
             warmup = reference_steps.STEPS[name].warmup_iterations(args.steps) if reference else 1
             for a in algos.values():  # warm-up: SAC-Lag's random phase, first allocations
                 for _ in range(warmup):
                     a.train()
-            times = {path: [] for path in PATHS}
+            times = {path: [] for path in algos}
             plain = []
             if reference:
                 step, batches = _reference(name, algos["fused"], min(args.steps, 300))
@@ -144,14 +148,12 @@ def main(argv=None) -> int:
             for a in algos.values():
                 a.stop()
         rllib, fused = (1e3 * statistics.median(t) for t in (times["rllib"], times["fused"]))
-        fused_ms[name] = fused
         if reference:
             ref, floor = 1e3 * statistics.median(plain), 1e3 * floor
             own = f"{ref:.2f} | {floor:.2f} | {rllib / fused:.2f}x | {fused / ref:.2f}x | {fused / floor:.2f}x"
         else:
             own = f"– | – | {rllib / fused:.2f}x | – | –"
-        base = built_on.get(name)
-        vs_house = f"{fused / fused_ms[base]:.2f}x ({base})" if base in fused_ms else "–"
+        vs_house = f"{fused / (1e3 * statistics.median(times[HOUSE])):.2f}x ({base})" if base else "–"
         lines.append(f"| {name} | {rllib:.2f} | {fused:.2f} | {own} | {vs_house} |")
         print(lines[-1], flush=True)
     print("\nms per gradient step (medians of", args.repeats, "interleaved repeats), one CPU, one torch thread")
