@@ -94,9 +94,9 @@ class Policy:
     @property
     def actions(self) -> tuple[str, ...]:
         """The action modes this policy can act with (the algorithm's ``ACTIONS``)."""
-        from lac_rllib.algorithms.registry import algo_config
+        from lac_rllib.algorithms.registry import actions
 
-        own = tuple(algo_config(self.algo).ACTIONS)
+        own = actions(self.algo)
         return (*own[:1], *((STOCHASTIC,) if self.module_to_env is not None else ()), *own[1:])
 
     @property

@@ -91,7 +91,7 @@ def check_output(output: str, config, resume: bool) -> None:
     new = run_config(config)
     if RESOLVED not in old:  # runs that recorded no resolution: their explicit values were it
         new.pop(RESOLVED)
-    speed = registry.algo_config(new[registry.ALGO_FIELD]).SPEED_FIELDS
+    speed = registry.speed_fields(new[registry.ALGO_FIELD])
     diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k) and k not in speed)
     if "total_env_steps" in diff and _lr_horizon(old) == _lr_horizon(new):
         # The budget shapes training only through the lr decay's horizon: with lr_decay_horizon

@@ -250,10 +250,10 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
                  for t in trials or first * n_trials]
     timesteps = max(t.timesteps for t in first)
     if sweep.eval_modes:  # each mode must be one some algorithm of the sweep acts in
-        from lac_rllib.algorithms.registry import algo_config
+        from lac_rllib.algorithms.registry import actions
 
         accepted = ["generator", "stochastic", *dict.fromkeys(
-            m for a in dict.fromkeys(t.algo for t in trials or first) for m in algo_config(a).ACTIONS)]
+            m for a in dict.fromkeys(t.algo for t in trials or first) for m in actions(a))]
         for i, mode in enumerate(sweep.eval_modes):
             if mode not in accepted:
                 raise ValueError(f"{origin(('eval_modes', i))}: {mode!r}; accepted with this sweep's algorithms: "

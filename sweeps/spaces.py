@@ -124,9 +124,9 @@ def config_id(task: str, timesteps: int, params: dict) -> str:
 
 def speed_fields(params: dict) -> frozenset:
     """The speed-only fields of the algorithm ``params`` names (``algo``; LAC without one)."""
-    from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, algo_config
+    from lac_rllib.algorithms import registry
 
-    return algo_config(params.get(ALGO_FIELD, DEFAULT_ALGO)).SPEED_FIELDS
+    return registry.speed_fields(params.get(registry.ALGO_FIELD, registry.DEFAULT_ALGO))
 
 
 # Short names of the searched fields in a search trial's label (ASCII: labels name Tune's trials).

@@ -7,16 +7,18 @@ docs treat every algorithm alike:
   mixed in), ``PARAMS`` its fields' dataclass and ``FIELDS`` their
   :class:`~lac_rllib.constrained.fields.FieldSet` (check, ``--set`` parser, docstrings);
 - ``PRESETS``: per task family (``mujoco``, ``safety_gym``, ``tiny``: ``TaskSpec.preset``);
-- ``SPEED_FIELDS``: fields that change how fast a run goes, not what it learns;
-- ``ACTIONS``: what ``lac-eval --actions`` accepts for its policies;
-- ``build_config(task, seed, sets, num_env_runners=0, timesteps=None, cpus=1)``: the validated config;
-- optional, read through the functions below (an algorithm without them gets their defaults):
-  ``BUDGET_FIELDS`` (a sweep's named budget → task preset or ``"*"`` → the fields it sets: the
-  smoke and quick sizes), ``benchmark_fields(benchmark, steps)`` (what benchmarks/update_step.py
-  and iteration.py build it with), ``plan_update_s(params, preset)`` (the plan's estimate of its update
-  seconds per env step on one CPU), ``warmup_env_steps(params)`` (the env steps before its
-  multiplier can act on the policy: early stopping waits for them, sweeps/scheduler.py; an
-  algorithm without one gets its house's: :func:`declared`), and on ``CONFIG_CLASS``
+- ``SPEED_FIELDS``: fields that change how fast a run goes, not what it learns, and ``ACTIONS``:
+  what ``lac-eval --actions`` accepts for its policies; an algorithm that extends another (its
+  *house*: :func:`house`, e.g. FOCOPS on PPO-Lag) may leave these, and every optional name below,
+  to its house (:func:`declared` reads the algorithm's own, else its house's, and so on up);
+- optional, read through the functions below (an algorithm without them, nor a house with them,
+  gets their defaults): ``build_config(task, seed, sets, num_env_runners=0, timesteps=None,
+  cpus=1)`` (the validated config; default ``CONFIG_CLASS.build``), ``BUDGET_FIELDS`` (a sweep's
+  named budget → task preset or ``"*"`` → the fields it sets: the smoke and quick sizes),
+  ``benchmark_fields(benchmark, steps)`` (what benchmarks/update_step.py and iteration.py build it
+  with), ``plan_update_s(params, preset)`` (the plan's estimate of its update seconds per env step
+  on one CPU), ``warmup_env_steps(params)`` (the env steps before its multiplier can act on the
+  policy: early stopping waits for them, sweeps/scheduler.py), and on ``CONFIG_CLASS``
   ``REPORTED_KEYS`` (the learner's values an iteration's row carries) and ``TASK_FAMILY_OVERRIDES``
   (fields per task family).
 
@@ -60,7 +62,9 @@ ALGO_FIELD = "algo"
 
 
 #: The names every algorithm's config module exposes (the optional ones: the module docstring).
-REQUIRED = ("CONFIG_CLASS", "PARAMS", "FIELDS", "PRESETS", "SPEED_FIELDS", "ACTIONS", "build_config")
+REQUIRED = ("CONFIG_CLASS", "PARAMS", "FIELDS", "PRESETS")
+#: Names an algorithm declares or takes from its house (the algorithm it extends: :func:`declared`).
+INHERITED = ("SPEED_FIELDS", "ACTIONS")
 #: An import path: identifiers joined by dots (what a user's algorithm is named by).
 MODULE_PATH = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
 #: Users' modules checked in this process (import path → module): each is checked once.
@@ -116,6 +120,12 @@ def user_module(path, search_dirs: tuple[str, ...] = ()) -> ModuleType:
                          f"{name!r} (ALGO); accepted: ALGO = {path!r}, the path its runs and checkpoints name it "
                          f"by{own}")
     _USER[path] = module
+    lacking = [n for n in INHERITED if declared(path, n) is None]
+    if lacking:
+        del _USER[path]
+        raise ValueError(f"algo {path}: neither its module nor the algorithm it extends declares "
+                         f"{', '.join(lacking)}; accepted: a module exposing {', '.join(REQUIRED + INHERITED)} "
+                         "(docs/baselines.md, \"Your own algorithm\")")
     return module
 
 
@@ -170,29 +180,36 @@ def algorithm_class(algo: str) -> type:
 def house(algo: str) -> str | None:
     """The package's algorithm that ``algo`` is built on: the nearest one whose algorithm class
     ``algo``'s extends (the first-order baselines: ``ppo_lag``, whose folder they import); None if
-    it extends none. Benchmarks time an algorithm against its house's step."""
-    classes = {algorithm_class(a): a for a in ALGOS if a != algo}
-    return next((classes[c] for c in algorithm_class(algo).__mro__[1:] if c in classes), None)
+    it extends none (or names no class). Benchmarks time an algorithm against its house's step."""
+    def resolved(a):
+        try:
+            return algorithm_class(a)
+        except ValueError:  # a config without an algorithm class path: nothing to extend or be extended
+            return None
+
+    own = resolved(algo)
+    classes = {c: a for a in ALGOS if a != algo and (c := resolved(a)) is not None}
+    return next((classes[c] for c in own.__mro__[1:] if c in classes), None) if own is not None else None
 
 
 def budget_fields(algo: str, budget: str, preset: str) -> dict:
     """The fields ``algo`` sets at the named ``budget`` on a task of ``preset`` (its
     ``BUDGET_FIELDS``; none declared: its preset's values)."""
-    by_preset = getattr(algo_config(algo), "BUDGET_FIELDS", {}).get(budget, {})
+    by_preset = declared(algo, "BUDGET_FIELDS", {}).get(budget, {})
     return dict(by_preset.get(preset, by_preset.get("*", {})))
 
 
 def benchmark_fields(algo: str, benchmark: str, steps: int) -> dict:
     """The fields ``algo`` is built with to be timed by ``benchmark`` (``"update_step"``,
     ``"iteration"``) over ``steps`` (its ``benchmark_fields``; none declared: none)."""
-    fields = getattr(algo_config(algo), "benchmark_fields", None)
+    fields = declared(algo, "benchmark_fields")
     return dict(fields(benchmark, steps)) if fields else {}
 
 
 def plan_update_s(algo: str, params: dict, preset: str) -> float:
     """The plan's estimate of ``algo``'s update seconds per env step on one CPU, beyond sampling
     (its ``plan_update_s``; none declared: 0, the estimate is the sampling alone)."""
-    estimate = getattr(algo_config(algo), "plan_update_s", None)
+    estimate = declared(algo, "plan_update_s")
     return float(estimate(params, preset)) if estimate else 0.0
 
 
@@ -229,8 +246,18 @@ def split_algo(sets: dict) -> tuple[str, dict]:
 def build_config(algo: str, task: str, seed: int, sets: dict, num_env_runners: int = 0,
                  timesteps: int | None = None, cpus: int = 1):
     """``algo``'s validated config for a run of ``timesteps`` env steps on ``task`` (no Ray needed)."""
-    return algo_config(algo).build_config(task, seed, sets, num_env_runners=num_env_runners,
-                                          timesteps=timesteps, cpus=cpus)
+    build = getattr(algo_config(algo), "build_config", None) or algo_config(algo).CONFIG_CLASS.build
+    return build(task, seed, sets, num_env_runners=num_env_runners, timesteps=timesteps, cpus=cpus)
+
+
+def actions(algo: str) -> tuple[str, ...]:
+    """What ``lac-eval --actions`` accepts for ``algo``'s policies (its or its house's ``ACTIONS``)."""
+    return tuple(declared(algo, "ACTIONS"))
+
+
+def speed_fields(algo: str) -> frozenset:
+    """``algo``'s fields that change how fast a run goes, not what it learns (its or its house's)."""
+    return frozenset(declared(algo, "SPEED_FIELDS"))
 
 
 def parse_sets(algo: str, pairs: list[str]) -> dict:

@@ -108,6 +108,6 @@ def test_the_registry_names_it_everywhere(algo):
     assert config.algo_class.ALGO == algo and config.preset == "safety_gym"
     assert set(registry.reported_keys(algo)) >= {"policy_loss", "vf_loss", "cost_vf_loss"}
     assert registry.budget_fields(algo, "smoke", "safety_gym")["train_batch_size_per_learner"] == 500
-    assert module.ACTIONS == ("generator",) and "torch_threads" in module.SPEED_FIELDS
+    assert registry.actions(algo) == ("generator",) and "torch_threads" in registry.speed_fields(algo)
     with pytest.raises(ValueError, match=f"unknown {module.FIELDS.what} config field 'nope'"):
         registry.parse_sets(algo, ["nope=1"])

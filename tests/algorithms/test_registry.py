@@ -82,7 +82,10 @@ def test_a_users_algorithm_is_named_by_its_import_path_and_read_like_the_package
     assert registry.budget_fields(TOY, "smoke", "tiny")["hidden"] == (16, 16)
     assert registry.budget_fields("ppo_lag", "smoke", "tiny")["hidden"] == (32, 32)
     assert registry.reported_keys(TOY)[-1] == "toy_marker" and "toy_marker" not in registry.reported_keys("ppo_lag")
-    assert registry.plan_update_s(TOY, {}, "tiny") == 0.0
+    # What it does not declare it takes from its house, PPO-Lag (registry.declared).
+    assert registry.plan_update_s(TOY, {}, "tiny") == registry.plan_update_s("ppo_lag", {}, "tiny") > 0
+    assert registry.speed_fields(TOY) == registry.speed_fields("ppo_lag")
+    assert registry.warmup_env_steps(TOY, {"train_batch_size_per_learner": 400}) == 800
     config = registry.build_config(TOY, "lac/PointHazard-v0", 0, {"toy_marker": 2.5}, timesteps=2000)
     assert config.params()["toy_marker"] == 2.5 and config.algo_class.ALGO == TOY
     assert registry.parse_sets(TOY, ["toy_marker=3.0"]) == {"toy_marker": 3.0}
@@ -91,8 +94,19 @@ def test_a_users_algorithm_is_named_by_its_import_path_and_read_like_the_package
 
 ALGO_MODULES = {
     "half_algo": ("CONFIG_CLASS = object\nACTIONS = ('generator',)\n",
-                  "algo half_algo: its module lacks PARAMS, FIELDS, PRESETS, SPEED_FIELDS, build_config; accepted: "
+                  "algo half_algo: its module lacks PARAMS, FIELDS, PRESETS; accepted: "
                   "a module exposing CONFIG_CLASS, PARAMS"),
+    # An algorithm of its own (no house to take them from) that does not say how it acts.
+    "orphan_algo": ("from ray.rllib.algorithms.algorithm import Algorithm\n"
+                    "from ray.rllib.algorithms.algorithm_config import AlgorithmConfig\n"
+                    "class OrphanAlgo(Algorithm):\n    ALGO = 'orphan_algo'\n"
+                    "class OrphanConfig(AlgorithmConfig):\n"
+                    "    ALGORITHM_CLASS = 'orphan_algo.OrphanAlgo'\n"
+                    "    def __init__(self):\n        super().__init__(algo_class=OrphanAlgo)\n"
+                    "CONFIG_CLASS, PARAMS, FIELDS, PRESETS = OrphanConfig, None, None, {}\n",
+                    "algo orphan_algo: neither its module nor the algorithm it extends declares SPEED_FIELDS, "
+                    "ACTIONS; accepted: a module exposing CONFIG_CLASS, PARAMS, FIELDS, PRESETS, SPEED_FIELDS, "
+                    "ACTIONS"),
     "broken_algo": ("raise RuntimeError('needs a GPU')\n",
                     "algo broken_algo: cannot be imported (RuntimeError: needs a GPU)"),
     "needy_algo": ("import not_installed_dependency\n",

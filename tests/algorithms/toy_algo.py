@@ -56,8 +56,7 @@ class ToyAlgo(PPOLag):
 
 
 CONFIG_CLASS, PARAMS, PRESETS = ToyConfig, ToyParams, ppo_lag.PRESETS
-SPEED_FIELDS, ACTIONS = ppo_lag.SPEED_FIELDS, ("generator",)
+ACTIONS = ("generator",)  # SPEED_FIELDS, plan_update_s, ...: PPO-Lag's, the algorithm it extends (registry.declared)
 #: Its own smoke sizes, smaller than PPO-Lag's (500-step iterations, 32-wide networks, 2 epochs).
 BUDGET_FIELDS = {"smoke": {"*": {"train_batch_size_per_learner": 400, "minibatch_size": 100, "num_epochs": 1,
                                  "hidden": (16, 16), "num_envs_per_env_runner": 1}}}
-build_config = ToyConfig.build

@@ -72,5 +72,6 @@ def test_the_evaluation_blocks_share_of_the_trials_time_is_their_seconds_against
     trials = pd.DataFrame({"eval_time_s": [3.0, 5.0, float("nan")], "wall_time_s": [36.0, 36.0, 40.0]})
     line = evaluation_share(trials)
     # Two trials ran a block: 8 s of evaluation against 72 s of training, 10% of their 80 s.
-    assert line == "Evaluation blocks: 4.0 s per trial on average, 10% of the 2 trials' time (training 36.0 s per trial)."
+    assert line == ("Evaluation blocks: 4.0 s per trial on average, 10% of the 2 trials' time "
+                    "(training 36.0 s per trial).")
     assert evaluation_share(trials.assign(eval_time_s=float("nan"))) == ""

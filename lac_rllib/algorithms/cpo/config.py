@@ -82,12 +82,6 @@ class CPOConfig(TRPOLagConfig):
     LEARNER_CLASS = "lac_rllib.algorithms.cpo.learner.CPOTorchLearner"
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = CPOConfig, CPOParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = trpo_lag.ACTIONS, trpo_lag.SPEED_FIELDS, trpo_lag.BUDGET_FIELDS
-benchmark_fields, plan_update_s = trpo_lag.benchmark_fields, trpo_lag.plan_update_s
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> CPOConfig:
-    """The CPOConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return CPOConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

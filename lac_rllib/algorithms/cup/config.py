@@ -76,18 +76,12 @@ class CUPConfig(PPOLagConfig):
         return int(self.num_epochs if self.projection_epochs is None else self.projection_epochs)
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = CUPConfig, CUPParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = ppo_lag.ACTIONS, ppo_lag.SPEED_FIELDS, ppo_lag.BUDGET_FIELDS
-benchmark_fields = ppo_lag.benchmark_fields
 
 
 def plan_update_s(params: dict, preset: str) -> float:
     """Update seconds per env step on one CPU beyond sampling: PPO-Lag's, doubled for stage 2's
     epochs (an upper estimate, not measured: stage 2 steps the policy only)."""
     return 2.0 * ppo_lag.plan_update_s(params, preset)
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> CUPConfig:
-    """The CUPConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return CUPConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

@@ -84,12 +84,6 @@ class FOCOPSConfig(PPOLagConfig):
     LEARNER_CLASS = "lac_rllib.algorithms.focops.learner.FOCOPSTorchLearner"
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = FOCOPSConfig, FOCOPSParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = ppo_lag.ACTIONS, ppo_lag.SPEED_FIELDS, ppo_lag.BUDGET_FIELDS
-benchmark_fields, plan_update_s = ppo_lag.benchmark_fields, ppo_lag.plan_update_s
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> FOCOPSConfig:
-    """The FOCOPSConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return FOCOPSConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

@@ -63,12 +63,6 @@ class P3OConfig(PPOLagConfig):
     LEARNER_CLASS = "lac_rllib.algorithms.p3o.learner.P3OTorchLearner"
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = P3OConfig, P3OParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = ppo_lag.ACTIONS, ppo_lag.SPEED_FIELDS, ppo_lag.BUDGET_FIELDS
-benchmark_fields, plan_update_s = ppo_lag.benchmark_fields, ppo_lag.plan_update_s
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> P3OConfig:
-    """The P3OConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return P3OConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

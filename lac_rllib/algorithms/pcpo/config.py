@@ -60,12 +60,6 @@ class PCPOConfig(CPOConfig):
     LEARNER_CLASS = "lac_rllib.algorithms.pcpo.learner.PCPOTorchLearner"
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = PCPOConfig, PCPOParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = cpo.ACTIONS, cpo.SPEED_FIELDS, cpo.BUDGET_FIELDS
-benchmark_fields, plan_update_s = cpo.benchmark_fields, cpo.plan_update_s
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> PCPOConfig:
-    """The PCPOConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return PCPOConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

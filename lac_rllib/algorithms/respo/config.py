@@ -166,9 +166,9 @@ class RESPOConfig(PPOLagConfig):
         return self.effective_cost_limit
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = RESPOConfig, RESPOParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = ppo_lag.ACTIONS, ppo_lag.SPEED_FIELDS, ppo_lag.BUDGET_FIELDS
-plan_update_s = ppo_lag.plan_update_s
 
 
 def benchmark_fields(benchmark: str, steps: int) -> dict:
@@ -178,9 +178,3 @@ def benchmark_fields(benchmark: str, steps: int) -> dict:
     if benchmark != "update_step":
         return {}
     return {**ppo_lag.benchmark_fields(benchmark, steps), "minibatch_size": 64, "num_epochs": 40, "hidden": (64, 64)}
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> RESPOConfig:
-    """The RESPOConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return RESPOConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

@@ -129,8 +129,9 @@ class TRPOLagConfig(PPOLagConfig):
         return float(self.target_kl) * (action_dim if self.kl_per_action_dim else 1)
 
 
+#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
+#: is its house's (registry.declared).
 CONFIG_CLASS, PARAMS = TRPOLagConfig, TRPOLagParams
-ACTIONS, SPEED_FIELDS, BUDGET_FIELDS = ppo_lag.ACTIONS, ppo_lag.SPEED_FIELDS, ppo_lag.BUDGET_FIELDS
 
 
 def benchmark_fields(benchmark: str, steps: int) -> dict:
@@ -145,9 +146,3 @@ def plan_update_s(params: dict, preset: str) -> float:
     (PCPO, CPO), 41 s (PPO-Lag): the critics' steps are two of PPO-Lag's three networks' and the
     policy's one step (~20-35 products on 2000 rows) costs less than its 80 minibatch steps."""
     return 0.5 * ppo_lag.plan_update_s(params, preset)
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> TRPOLagConfig:
-    """The TRPOLagConfig a run of ``timesteps`` env steps uses (validated; as PPO-Lag's ``build_config``)."""
-    return TRPOLagConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

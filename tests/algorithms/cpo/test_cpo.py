@@ -23,12 +23,12 @@ DELTA = 0.02  # target_kl 0.01 per action dimension
 
 
 def test_defaults_are_omnisafes_and_the_ssa_preset_scales_the_gap():
-    config = C.build_config("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.target_kl, config.cg_iters, config.backtrack_iters, config.cost_gap_scale,
             config.dual_convention, config.critic_lr, config.num_epochs, config.minibatch_size) == \
         (0.01, 15, 20, "none", "paper", 1e-3, 10, 128)
     assert not {"nu_init", "lagrangian_lr"} & C.FIELDS.names  # no multiplier
-    ssa = C.build_config("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
+    ssa = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
     assert (ssa.cost_gap_scale, ssa.cost_window, ssa.backtrack_iters, ssa.cg_iters, ssa.max_kl(2)) == \
         ("episode_length", None, 10, 10, 0.01)
     docs = C.FIELDS.docs()

@@ -28,11 +28,11 @@ PATHS = ["rllib", "fused"]
 
 
 def test_defaults_are_cup_yaml():
-    config = C.build_config("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.target_kl, config.nu_max, config.nu_init, config.lagrangian_lr, config.clip_param) == \
         (0.01, 2.0, 0.001, 0.035, 0.2)
     assert (config.num_epochs, config.stage2_epochs, config.minibatch_size) == (40, 40, 64)  # update_iters both
-    tiny = C.build_config("lac/PointHazard-v0", 0, {"projection_epochs": 3}, timesteps=1000)
+    tiny = C.CONFIG_CLASS.build("lac/PointHazard-v0", 0, {"projection_epochs": 3}, timesteps=1000)
     assert (tiny.stage2_epochs, tiny.num_epochs, tiny.target_kl) == (3, 10, 0.02)  # the tiny preset's KL stop
     assert set(C.PRESETS) == set(C.PRESET_NAMES) == {"mujoco", "safety_gym", "tiny", "omnisafe"}
     assert {metrics.PROJECTION_LOSS, metrics.PROJECTION_EPOCHS, metrics.PROJECTION_KL} <= set(C.CUPConfig.REPORTED_KEYS)
@@ -182,7 +182,7 @@ def test_nu_does_not_enter_stage_one(switch, path):
 def test_cup_trains_and_reports_its_keys(ray_session, minibatch_size):
     sets = {"train_batch_size_per_learner": 400, "minibatch_size": minibatch_size, "num_epochs": 2,
             "num_envs_per_env_runner": 4, "hidden": (32, 32)}
-    algo = C.build_config("lac/PointHazard-v0", 0, sets, timesteps=20_000).build_algo()
+    algo = C.CONFIG_CLASS.build("lac/PointHazard-v0", 0, sets, timesteps=20_000).build_algo()
     try:
         assert type(algo).ALGO == "cup"
         for _ in range(2):

@@ -24,7 +24,7 @@ TASK = "lac/PointHazard-v0"  # cost limit 2, action (2,)
 
 
 def test_defaults_are_omnisafes():
-    config = C.build_config("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.projection, config.backtrack_iters, config.target_kl, config.cg_iters, config.cost_gap_scale) == \
         ("omnisafe", 200, 0.01, 15, "none")
     assert "cpo_case" not in C.PCPOConfig.REPORTED_KEYS

@@ -28,7 +28,7 @@ TRUNCATED = [G**3, G**2, G, 1.0, G**3, G**2, G, 1.0, G**2 * 0.4, G * 0.4]
 
 
 def test_defaults_are_the_authors():
-    config = C.build_config("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert config.nu_init == pytest.approx(math.log1p(math.exp(0.25)))  # p₀ = 0.25, ν = softplus(p)
     assert (config.lagrangian_lr, config.nu_parametrization, config.cost_window, config.lr, config.critic_lr,
             config.reach_critic_lr, config.reach_gamma, config.lambda_, config.clip_param) == \
@@ -198,7 +198,7 @@ def test_nu_steps_on_the_reach_weighted_violation_once_before_the_policy(monkeyp
 
 # ----- inside RLlib -----
 def test_two_iterations_report_respo_s_keys_and_v_p_stays_on_the_learner(ray_session):
-    algo = C.build_config("lac/PointHazard-v0", 0, {"train_batch_size_per_learner": 400, "minibatch_size": 100,
+    algo = C.CONFIG_CLASS.build("lac/PointHazard-v0", 0, {"train_batch_size_per_learner": 400, "minibatch_size": 100,
                                                     "num_epochs": 2, "num_envs_per_env_runner": 1},
                           timesteps=20_000).build_algo()
     try:

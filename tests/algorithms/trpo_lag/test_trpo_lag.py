@@ -25,13 +25,13 @@ ROWS = 400
 
 
 def test_defaults_are_omnisafes_and_delta_is_per_action_dimension():
-    config = C.build_config("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.target_kl, config.kl_per_action_dim, config.cg_iters, config.cg_damping, config.backtrack_iters,
             config.backtrack_coeff) == (0.01, True, 15, 0.1, 15, 0.8)  # TRPOLag.yaml, trpo.py
     assert (config.critic_lr, config.num_epochs, config.minibatch_size, config.nu_init, config.lagrangian_lr,
             config.train_batch_size_per_learner) == (1e-3, 10, 128, 0.001, 0.035, 20_000)
     assert config.max_kl(2) == pytest.approx(0.02) and config.max_kl(17) == pytest.approx(0.17)
-    ssa = C.build_config("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
+    ssa = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
     assert (ssa.cg_iters, ssa.backtrack_iters, ssa.backtrack_coeff, ssa.nu_init, ssa.lagrangian_lr,
             ssa.nu_parametrization, ssa.train_batch_size_per_learner, ssa.hidden, ssa.minibatch_size) == \
         (10, 10, 0.8, 1.0, 0.05, "softplus", 30_000, (256, 256), None)
