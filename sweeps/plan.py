@@ -50,6 +50,9 @@ class Plan:
     confirms: tuple | None = None
     #: A user's algorithm (its import path) → the folder its trials import it from (registry.module_dir).
     user_algos: dict = dataclasses.field(default_factory=dict)
+    #: Each trial's estimated seconds (a search: the first configuration's, per trial): the wall
+    #: time at another concurrency (a cluster's, known once connected) is made from them again.
+    trial_seconds: tuple = ()
     #: ``scheduler: asha``: (grace period in env steps, why, the rungs) (sweeps/scheduler.py); else None.
     early_stopping: tuple | None = None
     #: (factor, what it came from): this machine's speed against the rates' (sweeps/calibration.py).
@@ -82,7 +85,7 @@ class Plan:
 
     def record(self) -> dict:
         """The plan as JSON-ready data (``sweep.json``, the parent run's plan.json): the trials by label."""
-        skip = ("trials", "sweep", "infra", "confirms")
+        skip = ("trials", "sweep", "infra", "confirms", "trial_seconds")
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
         return out | {"tracking_uri": self.tracking_uri, "budget": self.budget, "seeds": list(self.seeds),
                       "trial_labels": [t.label() for t in self.trials] if self.trials else None}

@@ -273,6 +273,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
         n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=timesteps, early_stopping=early,
         estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
+        trial_seconds=tuple(per_trial),
         calibration=(calibration.factor, calibration.source),
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
         user_algos=user_algos(sweep),

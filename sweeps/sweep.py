@@ -139,6 +139,20 @@ def param_space(plan: Plan, parent_run_id: str) -> dict:
     return {**common, "trial": tune.grid_search([dataclasses.asdict(t) for t in plan.trials])}
 
 
+def at_cluster_concurrency(plan: Plan, cpus: int) -> Plan:
+    """The plan at the concurrency a cluster of ``cpus`` CPUs gives (the plan, made before Ray
+    connected, counted this machine's), its wall time estimated again from its trials' seconds;
+    printed, as the plan's own lines were."""
+    from sweeps.run import estimate_wall_s
+
+    concurrency = min(plan.n_trials, max(1, cpus // plan.sweep.cpus_per_trial))
+    wall = estimate_wall_s(list(plan.trial_seconds), concurrency) if plan.trial_seconds else plan.estimated_wall_s
+    plan = dataclasses.replace(plan, concurrency=concurrency, estimated_wall_s=wall)
+    print(f"  cluster: {cpus} CPUs -> {concurrency} trials at once; estimated wall time ~{wall / 60:.0f} min, "
+          f"{plan.estimated_cpu_h:.1f} CPU-hours", flush=True)
+    return plan
+
+
 def parent_params(plan: Plan, commit: str) -> dict:
     """The parent run's params: the resolved sweep's settings (its file is ``sweep.yaml``) and where it ran."""
     sweep, infra = plan.sweep, plan.infra
@@ -169,9 +183,7 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
               f"Ray cluster has ({biggest:g} CPUs); accepted: 1..{biggest:g}", file=sys.stderr)
         return 2
     if plan.sweep.max_concurrent is None and infra.address:  # the plan could only count this machine's CPUs
-        cpus = int(ray.cluster_resources().get("CPU", 1))
-        plan = dataclasses.replace(plan, concurrency=min(plan.n_trials, max(1, cpus // cpus_per_trial)))
-        print(f"  cluster: {cpus} CPUs -> {plan.concurrency} trials at once", flush=True)
+        plan = at_cluster_concurrency(plan, int(ray.cluster_resources().get("CPU", 1)))
     tracker = SweepTracker(plan.tracking_uri, plan.experiment)
     state_file = sweep_dir / SWEEP_FILE
     previous = json.loads(state_file.read_text()) if infra.resume else {}

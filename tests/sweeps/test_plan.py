@@ -1,5 +1,6 @@
 """The plan a user sees before Ray starts is what the README promises (no Ray: make_plan only)."""
 
+import os
 import re
 from pathlib import Path
 
@@ -179,3 +180,16 @@ def test_an_evaluation_mode_no_algorithm_of_the_sweep_has_is_refused_before_ray(
     f.write_text("task: lac/PointHazard-v0\nbudget: smoke\neval_every: 2\neval_episodes: 0\n")
     with pytest.raises(ValueError, match="eval_every with eval_episodes 0"):
         _plan(tmp_path, monkeypatch, "--config", str(f))
+
+
+def test_on_a_cluster_the_wall_time_is_estimated_again_at_its_cpus(tmp_path, monkeypatch, capsys):
+    from sweeps.sweep import at_cluster_concurrency
+
+    plan = _plan(tmp_path, monkeypatch, "--space", "ablation")
+    assert plan.concurrency == min(24, os.cpu_count() or 1) and len(plan.trial_seconds) == 24
+    wide = at_cluster_concurrency(plan, 48)  # more CPUs than trials: each trial on its own CPU
+    assert wide.concurrency == 24 and wide.estimated_wall_s == pytest.approx(max(plan.trial_seconds))
+    narrow = at_cluster_concurrency(plan, 1)
+    assert narrow.estimated_wall_s == pytest.approx(sum(plan.trial_seconds))
+    assert narrow.estimated_cpu_h == plan.estimated_cpu_h
+    assert "cluster: 48 CPUs -> 24 trials at once; estimated wall time ~" in capsys.readouterr().out
