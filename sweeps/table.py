@@ -21,19 +21,15 @@ Conventions:
   algorithm that ran more than one configuration on a task (a cell would average different
   configurations; summary.md keeps them apart).
 
-The published figures are data, checked by :class:`Published` when read: each has a source (with
-its URL, simulator, env steps and per-task limit), our task id and algorithm name, and [mean, std]
-of return and cost as the source prints them.
+The published figures are data, checked when read (sweeps/published.py).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import html
 import math
 from pathlib import Path
-from typing import Annotated, Literal
 
 import matplotlib
 
@@ -41,169 +37,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-import yaml  # noqa: E402
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator  # noqa: E402
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO  # noqa: E402
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN  # noqa: E402
-from sweeps.bounded_yaml import YamlRefused  # noqa: E402
-from sweeps.bounded_yaml import read as read_yaml  # noqa: E402
-from sweeps.bounded_yaml import read_text as read_yaml_text  # noqa: E402
 from sweeps.configurations import fmt_num, is_na, prepared  # noqa: E402
+from sweeps.published import ROWS, Figure, Published, Source, published  # noqa: E402
 from sweeps.score import described  # noqa: E402
 from sweeps.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
-from sweeps.sweep_file import MAX_BUDGET, Int, KeyedError, Origin, Real, SafeName  # noqa: E402
 
-PUBLISHED_FILE = Path(__file__).with_name("published.yaml")
-#: The rows of published figures under each task (a source's ``row``) and their labels, in print order.
-ROWS = {"paper": "paper", "omnisafe": "OmniSafe"}
 BEST_MARK = "★"
 BEST_COLOUR = "#1f4fd1"  # the paper's blue
-
-
-# ----------------------------------------------------------------------------- the published figures
-
-
-class PublishedError(ValueError):
-    """A bad published-figures file: ``FILE:LINE: key.path: what is wrong`` (one line)."""
-
-
-def _schema() -> ConfigDict:
-    return ConfigDict(extra="forbid", use_attribute_docstrings=True, populate_by_name=True)
-
-
-Std = Annotated[float, Field(strict=True, ge=0, allow_inf_nan=False)]
-Text = Annotated[str, Field(min_length=1, max_length=400)]
-
-
-class SourceTask(BaseModel):
-    """A task as a source names it, and the limit its figures are under."""
-
-    model_config = _schema()
-    name: Text
-    """The source's name of the task (the paper's "PointGoal", "Ant-v3")."""
-    cost_limit: Real = Field(ge=0)
-    """The limit of the source's runs on it (as printed)."""
-
-
-class Source(BaseModel):
-    """Where figures were published: one table of one paper or benchmark."""
-
-    model_config = _schema()
-    title: Text
-    """The table, e.g. "OmniSafe's on-policy benchmark on Safety-Gymnasium, Table 2"."""
-    url: str = Field(pattern=r"^https://\S+$", max_length=400)
-    """Where to read it (a repository at a commit where there is one)."""
-    row: Literal["paper", "omnisafe"]
-    """Which row under each task its figures print in (:data:`ROWS`)."""
-    simulator: Text
-    """What its runs ran on: a figure only compares with a run on the same."""
-    steps: Int(1, MAX_BUDGET)
-    """Env steps per run behind its figures (a figure may say another)."""
-    seeds: Text | None = None
-    """How many runs its figures average, as it says."""
-    note: Annotated[str, Field(min_length=1, max_length=1000)] | None = None
-    """What else a reader must know to compare with it."""
-    tasks: dict[str, SourceTask] = Field(min_length=1)
-    """Our task id → the source's name of it and its limit."""
-
-
-class Figure(BaseModel):
-    """One algorithm on one task as a source prints it; ``steps`` and ``cost_limit`` default to the
-    source's (filled in when the file is read)."""
-
-    model_config = _schema()
-    source: SafeName
-    """A key of ``sources``."""
-    task: Text
-    """Our task id (docs/tasks.md), a key of its source's ``tasks``."""
-    algo: Text
-    """Our algorithm's name, a key of ``algorithms``."""
-    return_: tuple[Real, Std] = Field(alias="return")
-    """[mean, std] of the final return."""
-    cost: tuple[Real, Std]
-    """[mean, std] of the final cost."""
-    steps: Int(1, MAX_BUDGET) | None = None
-    """Env steps behind this figure (default: its source's)."""
-    cost_limit: Real | None = Field(None, ge=0)
-    """The limit of its runs (default: its source's for the task)."""
-    note: Text | None = None
-    """What differs for this figure (e.g. the algorithm's own limit)."""
-
-
-class Published(BaseModel):
-    """The published-figures file (sweeps/published.yaml)."""
-
-    model_config = _schema()
-    algorithms: dict[str, Text] = Field(min_length=1)
-    """Our algorithm names → the names the table prints (the paper's columns), in the table's order."""
-    sources: dict[SafeName, Source] = Field(min_length=1)
-    """The sources by a short id."""
-    figures: tuple[Figure, ...] = Field(min_length=1)
-    """The figures."""
-
-    @model_validator(mode="after")
-    def _resolve(self):
-        seen, filled = set(), []
-        for i, f in enumerate(self.figures):
-            if f.source not in self.sources:
-                raise KeyedError(("figures", i, "source"), f"{f.source!r} is not a source; accepted: "
-                                                           f"{', '.join(self.sources)}")
-            src = self.sources[f.source]
-            if f.task not in src.tasks:
-                raise KeyedError(("figures", i, "task"), f"{f.task!r} is not a task of {f.source}; accepted: "
-                                                         f"{', '.join(src.tasks)}")
-            if f.algo not in self.algorithms:
-                raise KeyedError(("figures", i, "algo"), f"{f.algo!r} is not in algorithms; accepted: "
-                                                         f"{', '.join(self.algorithms)}")
-            if (f.source, f.task, f.algo) in seen:
-                raise KeyedError(("figures", i), f"a second figure of {f.algo} on {f.task} from {f.source}")
-            seen.add((f.source, f.task, f.algo))
-            filled.append(f.model_copy(update={"steps": f.steps or src.steps,
-                                               "cost_limit": src.tasks[f.task].cost_limit
-                                               if f.cost_limit is None else f.cost_limit}))
-        self.figures = tuple(filled)
-        return self
-
-    def find(self, row: str, task: str, algo: str) -> Figure | None:
-        """The first figure of ``algo`` on ``task`` among the sources printed in ``row``."""
-        return next((f for f in self.figures if f.task == task and f.algo == algo
-                     and self.sources[f.source].row == row), None)
-
-    def task_order(self) -> list[str]:
-        """Our task ids in the order the sources list them (the papers' row order)."""
-        return list(dict.fromkeys(t for s in self.sources.values() for t in s.tasks))
-
-
-def load_published(path: str | Path = PUBLISHED_FILE, text: str | None = None) -> Published:
-    """The published figures at ``path``, checked; a PublishedError names the line and the key."""
-    path = Path(path)
-    try:
-        data, node = read_yaml(read_yaml_text(path) if text is None else text, yaml.SafeLoader)
-    except YamlRefused as e:
-        raise PublishedError(f"{path}{f':{e.line}' if e.line else ''}: {e.message}") from None
-    try:
-        return Published.model_validate(data)
-    except ValidationError as e:
-        raise PublishedError(_first_error(e, Origin(path, node))) from None
-
-
-def _first_error(e: ValidationError, origin: Origin) -> str:
-    err = e.errors()[0]
-    loc = tuple(err["loc"])
-    cause = (err.get("ctx") or {}).get("error")
-    if isinstance(cause, KeyedError):
-        loc = (*loc, *cause.loc)
-    msg = err["msg"].removeprefix("Value error, ")
-    if err["type"] == "extra_forbidden":
-        msg = f"unknown key {loc[-1]!r}"
-    return f"{origin(loc)}: {msg}"
-
-
-@functools.lru_cache(maxsize=1)
-def published() -> Published:
-    """The package's published figures (sweeps/published.yaml), read once."""
-    return load_published()
 
 
 # ----------------------------------------------------------------------------- the table

@@ -11,7 +11,8 @@ import pytest
 from lac_rllib.algorithms.registry import ALGOS
 from sweeps import run as cli
 from sweeps import sweep_file, table
-from sweeps.table import BEST_MARK, PublishedError, load_published
+from sweeps.published import PublishedError, load_published
+from sweeps.table import BEST_MARK
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NAN = math.nan
