@@ -56,11 +56,15 @@ PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)
     "focops/HumanoidVelocity-v0": ((5023.27, 107.99), (20.12, 0.58)),
     "focops/HumanoidCircle-v0": ((925.03, 111.95), (49.57, 1.16)),
 }
-OMNISAFE = {  # OmniSafe's benchmark tables (cost limit 25)
+OMNISAFE = {  # OmniSafe's benchmark tables (cost limit 25); per algorithm: sweeps/published.yaml
     "SafetyPointGoal1-v0": [("OmniSafe SACLag, 3M steps", (21.45, 6.97), (19.17, 9.72)),
                             ("OmniSafe PPOLag, 10M steps", (12.96, 6.95), (25.80, 34.99)),
                             ("unconstrained SAC (OmniSafe)", (27.04, None), (67.57, None))],
 }
+#: OmniSafe's unconstrained on-policy rows (10M steps, its on-policy table), shown beside a run of
+#: that algorithm with its multiplier pinned at 0 (a variant whose algo is the key).
+UNCONSTRAINED = {"SafetyPointGoal1-v0": {"trpo_lag": ("unconstrained TRPO (OmniSafe), 10M steps", 27.20, 45.88),
+                                         "ppo_lag": ("unconstrained PPO (OmniSafe), 10M steps", 25.44, 55.72)}}
 CURVE_KEYS = ("env_steps", "episode_return", "episode_cost", "cost_limit", "nu", "nu_max",
               "langevin_at_bound", "langevin_clip_fraction", "langevin_grad_norm", "actor_std_mean",
               "time_s")
@@ -205,7 +209,44 @@ def _fmt(mean: float, std: float | None) -> str:
     return f"{mean:.2f}" if std is None or math.isnan(std) else f"{mean:.2f} ± {std:.2f}"
 
 
-def final_table(df, task: str, order: list[str], compare_at: int | None = None) -> tuple[str, int]:
+def variant_algos(commands: list[str]) -> dict[str, tuple[str, bool]]:
+    """variant → (its algorithm, whether it pins the multiplier at 0: ``lagrangian_lr=0.0`` and
+    ``nu_init=0.0``), read from the runs' commands (``--output .../runs/<variant>/seed<k>``)."""
+    from lac_rllib.algorithms.registry import DEFAULT_ALGO
+
+    out = {}
+    for line in commands:
+        words = line.split()
+        if "--output" not in words:
+            continue
+        variant = Path(words[words.index("--output") + 1]).parent.name
+        algo = words[words.index("--algo") + 1] if "--algo" in words else DEFAULT_ALGO
+        out[variant] = (algo, "lagrangian_lr=0.0" in words and "nu_init=0.0" in words)
+    return out
+
+
+def published_rows(task: str, variants: dict, shown: list[str]) -> list[str]:
+    """Table rows of the published figures (sweeps/published.yaml: the paper's and OmniSafe's) of
+    the algorithms the variants run (``variants``: :func:`variant_algos`), those not already
+    ``shown``; OmniSafe's unconstrained row beside a variant that pins the multiplier at 0."""
+    from lac_rllib.algorithms.registry import DEFAULT_ALGO
+    from sweeps.published import ROWS, published
+
+    pub, lines = published(), []
+    for algo in dict.fromkeys(a for a, pinned in variants.values() if a != DEFAULT_ALGO and not pinned):
+        for row, label in ROWS.items():
+            f, name = pub.find(row, task, algo), f"{label} {pub.algorithms.get(algo, algo)}"
+            if f and not any(n.startswith(f"{name},") for n in shown):
+                lines.append(f"| {name}, {f.steps / 1e6:g}M steps | | {_fmt(*f.return_)} | {_fmt(*f.cost)} | | | |")
+    for algo, pinned in variants.values():
+        entry = UNCONSTRAINED.get(task, {}).get(algo)
+        if pinned and entry:
+            lines.append(f"| {entry[0]} | | {_fmt(entry[1], None)} | {_fmt(entry[2], None)} | | | |")
+    return list(dict.fromkeys(lines))
+
+
+def final_table(df, task: str, order: list[str], compare_at: int | None = None,
+                variants: dict | None = None) -> tuple[str, int]:
     """Markdown table of the final 10% at the common budget; returns (markdown, common steps).
 
     The budget is the fewest env steps any run reached, or ``compare_at``: runs short of it are
@@ -243,6 +284,7 @@ def final_table(df, task: str, order: list[str], compare_at: int | None = None) 
         lines.append(f"| paper LAC, 2.5M steps | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
     for name, (r, rs), (c, cs) in OMNISAFE.get(task, []):
         lines.append(f"| {name} | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
+    lines += published_rows(task, variants or {}, shown=[n for n, *_ in OMNISAFE.get(task, [])])
     lines += ["", f"Cost limit {limit:g}."]
     if short:
         lines += ["", f"Not yet at {common:,} steps, so not in the table: {', '.join(short)}."]
@@ -285,7 +327,6 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
     order = [*order, *sorted(set(df["variant"]) - set(order))]  # runs of other invocations too
     df.to_csv(out / "curves.csv", index=False)
     plot(df, task, order, out / "curves.png")
-    table, common = final_table(df, task, order, compare_at)
     commands = sorted(portable_command(p.read_text().strip()) for p in out.glob("runs/*/seed*/command.txt"))
     reached = df.groupby(["variant", "seed"]).agg(steps=("env_steps", "max"), hours=("time_s", "max"))
     budget = "\n".join(f"- {v} seed {s}: {int(r.steps):,} env steps in {r.hours / 3600:.2f} h"
@@ -296,6 +337,7 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
         budget += ("\n\nFrom earlier reports' curves (" + ", ".join(str(p) for p in include) + "), their run "
                    "directories gone: " + ", ".join(f"{v} seed {s_}" for v, s_ in earlier) + ".")
         commands += sorted(earlier_commands(include, earlier))
+    table, common = final_table(df, task, order, compare_at, variant_algos(commands))
     text = (f"# {task}: learning curves\n\n"
             f"Budget per run: {f'{timesteps:,} env steps' if timesteps else 'see the commands'}; reached:\n{budget}\n\n"
             f"{table}\n\n![curves](curves.png)\n\nCommands:\n\n```\n" + "\n".join(commands) + "\n```\n")

@@ -104,3 +104,20 @@ def test_portable_output(fidelity, path, written):
     assert fidelity.portable_output(path) == written
     assert fidelity.portable_command(f"lac-train --seed 0 --output {path} --checkpoint-every 2") == (
         f"lac-train --seed 0 --output {written} --checkpoint-every 2")
+
+
+def test_the_table_shows_the_published_figures_of_the_algorithms_it_ran(fidelity):
+    commands = [
+        "lac-train --task SafetyPointGoal1-v0 --seed 0 --output RUN_DIR/x/runs/cpo/seed0 --algo cpo",
+        "lac-train --task SafetyPointGoal1-v0 --seed 0 --output RUN_DIR/x/runs/trpo/seed0 --algo trpo_lag "
+        "--set lagrangian_lr=0.0 --set nu_init=0.0",
+        "lac-train --task SafetyPointGoal1-v0 --seed 0 --output RUN_DIR/x/runs/defaults/seed0",
+    ]
+    variants = fidelity.variant_algos(commands)
+    assert variants == {"cpo": ("cpo", False), "trpo": ("trpo_lag", True), "defaults": ("lac", False)}
+    rows = fidelity.published_rows("SafetyPointGoal1-v0", variants, shown=[])
+    # CPO's figures from sweeps/published.yaml (the paper's Table 2 and OmniSafe's), OmniSafe's
+    # unconstrained TRPO beside the pinned run; nothing for LAC (its paper row is the table's own).
+    assert rows == ["| paper CPO, 2.5M steps | | 23.16 ± 2.09 | 46.00 ± 15.85 | | | |",
+                    "| OmniSafe CPO, 10M steps | | 20.46 ± 1.38 | 28.84 ± 7.76 | | | |",
+                    "| unconstrained TRPO (OmniSafe), 10M steps | | 27.20 | 45.88 | | | |"]
