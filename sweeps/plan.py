@@ -53,6 +53,8 @@ class Plan:
     #: Each trial's estimated seconds (a search: the first configuration's, per trial): the wall
     #: time at another concurrency (a cluster's, known once connected) is made from them again.
     trial_seconds: tuple = ()
+    #: The evaluation blocks' share of the estimated time (sweeps/run.py ``estimate_eval_s``).
+    eval_share: float = 0.0
     #: ``scheduler: asha``: (grace period in env steps, why, the rungs) (sweeps/scheduler.py); else None.
     early_stopping: tuple | None = None
     #: (factor, what it came from): this machine's speed against the rates' (sweeps/calibration.py).

@@ -246,8 +246,10 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     n_trials = len(trials) if trials is not None else sweep.num_samples * len(seeds)
     concurrency = min(sweep.max_concurrent or max(1, (os.cpu_count() or 1) // cpus), n_trials)
     calibration = machine_factor(infra.tracking_uri, sweep.experiment, nominal_trial_s)
-    per_trial = [calibration(t.algo) * estimate_trial_s(t.task, t.timesteps, t.params, cpus)
-                 for t in trials or first * n_trials]
+    evals = [estimate_eval_s(t.task, t.timesteps, t.params, sweep) for t in trials or first * n_trials]
+    per_trial = [calibration(t.algo) * (estimate_trial_s(t.task, t.timesteps, t.params, cpus) + e)
+                 for t, e in zip(trials or first * n_trials, evals)]
+    eval_share = eval_share_of(evals, per_trial, trials or first * n_trials, calibration)
     timesteps = max(t.timesteps for t in first)
     if sweep.eval_modes:  # each mode must be one some algorithm of the sweep acts in
         from lac_rllib.algorithms.registry import actions
@@ -273,7 +275,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
         n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=timesteps, early_stopping=early,
         estimated_wall_s=estimate_wall_s(per_trial, concurrency), estimated_cpu_h=sum(per_trial) * cpus / 3600,
-        trial_seconds=tuple(per_trial),
+        trial_seconds=tuple(per_trial), eval_share=eval_share,
         calibration=(calibration.factor, calibration.source),
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
         user_algos=user_algos(sweep),
@@ -480,6 +482,36 @@ def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
     return STARTUP_S + (steps / RATE.get(preset, min(RATE.values())) + extra) / cpus ** 0.5
 
 
+#: Steps per episode the plan assumes for the evaluation block (the task presets' episode limits:
+#: PointHazard's 100, Safety-Gymnasium's and the velocity tasks' 1,000; episodes may end sooner).
+EPISODE_STEPS = {"tiny": 100, "safety_gym": 1000, "mujoco": 1000}
+
+
+def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> float:
+    """Rough seconds of a trial's evaluation blocks (sweeps/trainable.py): ``eval_episodes``
+    episodes per mode its algorithm has, at the end and every ``eval_every`` iterations, at the
+    preset's rate (one env, one policy forward a step: no faster than training's sampling)."""
+    from lac_rllib.algorithms.registry import actions
+    from lac_rllib.tasks import get_task
+
+    episodes = 10 if sweep.eval_episodes is None else sweep.eval_episodes
+    if not episodes:
+        return 0.0
+    algo = params.get(ALGO_FIELD, DEFAULT_ALGO)
+    modes = [m for m in sweep.eval_modes or ("generator", "stochastic") if m == "stochastic" or m in actions(algo)]
+    per_iteration = params.get("env_steps_per_iteration") or params.get("train_batch_size_per_learner") or 0
+    blocks = 1 + (int(steps // per_iteration) // sweep.eval_every if sweep.eval_every and per_iteration else 0)
+    preset = get_task(task).preset
+    return blocks * len(modes) * episodes * EPISODE_STEPS.get(preset, 1000) / RATE.get(preset, min(RATE.values()))
+
+
+def eval_share_of(evals: list[float], per_trial: list[float], trials, calibration) -> float:
+    """The evaluation blocks' share of the trials' estimated time."""
+    spent = sum(calibration(t.algo) * e for t, e in zip(trials, evals))
+    total = sum(per_trial)
+    return spent / total if total else 0.0
+
+
 def nominal_trial_s(params: dict) -> float | None:
     """What the rates say an earlier trial (its MLflow params, as logged) took, to set against its
     run's span (sweeps/calibration.py); None: not comparable."""
@@ -522,7 +554,7 @@ def print_plan(plan: Plan) -> None:
              if sweep.score == "eval" else "the mean over each trial's final 10% of training iterations")
           + (f"; evaluation block: {episodes} episodes x {', '.join(modes)} at each trial's end"
              + (f" and every {sweep.eval_every} iterations" if sweep.eval_every else "")
-             + "; its share of the trials' time is in the sweep's note" if episodes else "; no evaluation block")
+             + f", ~{plan.eval_share:.0%} of the estimated time" if episodes else "; no evaluation block")
           + ")")
     print(f"  env steps per trial: {plan.timesteps:,}   "
           f"concurrency: {plan.concurrency} x {sweep.cpus_per_trial} CPU"

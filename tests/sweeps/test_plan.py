@@ -56,8 +56,9 @@ def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypat
 
     chain = CHAIN_S_PER_STEP["safety_gym"] * steps
 
-    def formula(t):  # one trial, 1 CPU: the estimate is this trial's
-        return cli.STARTUP_S + steps / cli.RATE["safety_gym"] + chain * t
+    def formula(t):  # one trial, 1 CPU: the estimate is this trial's, its evaluation block included
+        evaluation = 2 * 10 * cli.EPISODE_STEPS["safety_gym"] / cli.RATE["safety_gym"]  # 2 modes x 10 episodes
+        return cli.STARTUP_S + steps / cli.RATE["safety_gym"] + chain * t + evaluation
 
     args = ("--space", "paper", "--task", "SafetyPointButton1-v0", "--budget", "paper", "--seeds", "1")
     plan = _plan(tmp_path, monkeypatch, *args)
@@ -193,3 +194,21 @@ def test_on_a_cluster_the_wall_time_is_estimated_again_at_its_cpus(tmp_path, mon
     assert narrow.estimated_wall_s == pytest.approx(sum(plan.trial_seconds))
     assert narrow.estimated_cpu_h == plan.estimated_cpu_h
     assert "cluster: 48 CPUs -> 24 trials at once; estimated wall time ~" in capsys.readouterr().out
+
+
+def test_the_estimate_counts_the_evaluation_blocks(tmp_path, monkeypatch, capsys):
+    f = tmp_path / "e.yaml"
+
+    def plan(extra: str):
+        f.write_text("task: SafetyPointGoal1-v0\nbudget: 40000\nseeds: 1\nalgo: ppo_lag\n" + extra)
+        return _plan(tmp_path, monkeypatch, "--config", str(f))
+
+    none, end, every = plan("eval_episodes: 0\n"), plan(""), plan("eval_every: 1\n")
+    assert none.eval_share == 0.0 and 0 < end.eval_share < every.eval_share
+    # 2 modes x 10 episodes x 1,000 steps at the preset's rate, once at the end; PPO-Lag's 20k-step
+    # iterations at 40k steps: with eval_every 1, 2 more blocks.
+    block = 2 * 10 * 1000 / cli.RATE["safety_gym"]
+    assert end.estimated_wall_s - none.estimated_wall_s == pytest.approx(block)
+    assert every.estimated_wall_s - none.estimated_wall_s == pytest.approx(3 * block)
+    cli.print_plan(end)
+    assert f"~{end.eval_share:.0%} of the estimated time" in capsys.readouterr().out
