@@ -124,6 +124,18 @@ class ConfigurationASHA(FIFOScheduler):
                 tune_controller.stop_trial(trial)
         return decision
 
+    def on_trial_complete(self, tune_controller, trial: Trial, result: dict) -> None:
+        """A seed that ended (its budget reached in a step past a rung it had not reported at):
+        its value counts at those rungs, so that its siblings waiting there are decided."""
+        if not result or self.time_attr not in result or self._metric not in result:
+            return
+        key, value = self._key(trial), float(result[self._metric])
+        for rung in [r for r in self.rungs if r <= result[self.time_attr]]:
+            values = self.values.setdefault((key, rung), {})
+            if trial.trial_id not in values:
+                values[trial.trial_id] = self.sign * value if math.isfinite(value) else -math.inf
+                self._decide(tune_controller, key, rung)
+
     def on_trial_error(self, tune_controller, trial: Trial) -> None:
         """A seed failed for good: its siblings no longer wait for it."""
         key = self._key(trial)

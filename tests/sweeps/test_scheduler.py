@@ -90,3 +90,13 @@ def test_the_grace_period_waits_for_the_multipliers_warm_up(algo, params, timest
     trial = types.SimpleNamespace(algo=algo, params=params)
     assert S.grace_period([trial], timesteps)[0] == expected
     assert S.grace_period([trial], timesteps, override=7)[0] == 7
+
+
+def test_a_seed_that_ends_past_a_rung_it_never_reported_at_releases_its_waiting_sibling():
+    sched, ctl = _setup(grace=1000, max_t=4000)
+    a0, a1 = _trial(sched, ctl, "A", 0), _trial(sched, ctl, "A", 1)
+    assert _result(sched, ctl, a0, 1000, 3.0) == TrialScheduler.PAUSE
+    # a1's one step went from below the rung to the end of its budget: Tune completes it.
+    sched.on_trial_complete(ctl, a1, {"env_steps": 4000, "objective": 5.0})
+    assert sched.decisions["A", 1000] == TrialScheduler.CONTINUE and not sched.waiting
+    assert sched.recorded[1000] == {"A": 4.0}
