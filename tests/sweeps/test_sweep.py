@@ -148,7 +148,8 @@ def test_search_scores_each_configuration_over_its_seeds(ray_session, tmp_path):
     expected = {}
     for runs in by_config.values():
         m = [r.data.metrics for r in runs]
-        ret, cost = (sum(x[k] for x in m) / 2 for k in ("episode_return", "episode_cost"))
+        # Each seed's declared score (score: eval, sweeps/score.py), as the trial reported it to Tune.
+        ret, cost = (sum(x[k] for x in m) / 2 for k in ("score_return", "score_cost"))
         limit = m[0]["cost_limit"]
         t = json.loads(runs[0].data.params["langevin_steps"])
         expected[t] = (round(objective(ret, cost, limit), 6), round(cost - limit, 6))
