@@ -20,9 +20,10 @@ last stdout line. Restoring needs no Ray cluster (nothing calls ray.init).
 
 MLflow layout (the sweep service's): a trial is a run whose tag ``lac.checkpoint_artifact_path``
 names the artifact directory holding its RLlib checkpoint, with param ``task`` and metrics
-``episode_return``, ``episode_cost``, ``cost_limit``, ``feasible``; a sweep is a parent run
-tagged ``lac.sweep=1`` whose trials carry ``mlflow.parentRunId``. ``--best-of`` evaluates the
-feasible trial (feasible = 1) with the highest episode_return. After evaluating a run, the
+``episode_return``, ``episode_cost``, ``cost_limit``, ``feasible`` and its score ``score_return``,
+``score_cost``; a sweep is a parent run tagged ``lac.sweep=1`` whose trials carry
+``mlflow.parentRunId``. ``--best-of`` evaluates the feasible trial with the highest return on the
+score the sweep ranked it on (sweeps/score.py). After evaluating a run, the
 results are logged back to it as metrics ``eval/<actions>/<name>`` (e.g.
 ``eval/generator/return_mean``), with tags ``lac.eval.<actions>.episodes`` / ``.seed``.
 
@@ -133,8 +134,11 @@ def get_run(client, run_id: str):
 
 
 def best_trial(client, sweep_run_id: str):
-    """The sweep's child run with feasible = 1 and the highest episode_return."""
-    from lac_rllib.constrained.metrics import EPISODE_RETURN, FEASIBLE
+    """The sweep's feasible child run with the highest return, on the score each trial was ranked
+    on (``score_return`` / ``score_cost`` against ``cost_limit``: sweeps/score.py); a trial of a
+    version before the score, on its last iteration's (``episode_return``, ``feasible``)."""
+    from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_RETURN, FEASIBLE
+    from sweeps.score import SCORE_COST, SCORE_RETURN
     from sweeps.tracking import PARENT_TAG, SWEEP_TAG
 
     parent = get_run(client, sweep_run_id)
@@ -146,15 +150,19 @@ def best_trial(client, sweep_run_id: str):
     if not children:
         raise UsageError(f"sweep {sweep_run_id} has no trial runs")
 
-    def score(run) -> float:
-        value = run.data.metrics.get(EPISODE_RETURN)
-        return -math.inf if value is None or math.isnan(value) else value
+    def scored(run) -> tuple[bool, float]:
+        m = run.data.metrics
+        if SCORE_RETURN in m and SCORE_COST in m and COST_LIMIT in m:
+            ok, value = m[SCORE_COST] <= m[COST_LIMIT], m[SCORE_RETURN]
+        else:
+            ok, value = m.get(FEASIBLE) == 1.0, m.get(EPISODE_RETURN)
+        return ok, -math.inf if value is None or math.isnan(value) else value
 
-    feasible = [r for r in children if r.data.metrics.get(FEASIBLE) == 1.0]
+    feasible = [r for r in children if scored(r)[0]]
     if not feasible:
         raise UsageError(f"sweep {sweep_run_id} has no feasible trial (none of its {len(children)} "
-                         "trials has metric feasible = 1)")
-    return max(feasible, key=score)
+                         "trials has its score's cost within its limit)")
+    return max(feasible, key=lambda r: scored(r)[1])
 
 
 def download_checkpoint(client, run, dst: str) -> str:

@@ -146,7 +146,7 @@ def mlflow_store(checkpoint, tmp_path_factory):
     client = MlflowClient(tracking_uri=uri)
     exp = client.create_experiment("lac-sweep", artifact_location=(root / "artifacts").as_uri())
 
-    def trial(parent, name, ret, feasible, with_checkpoint=True):
+    def trial(parent, name, ret, feasible, with_checkpoint=True, score=None):
         tags = {"mlflow.parentRunId": parent, "mlflow.runName": name}
         if with_checkpoint:
             tags[CHECKPOINT_TAG] = "checkpoint"
@@ -155,7 +155,7 @@ def mlflow_store(checkpoint, tmp_path_factory):
         rid = run.info.run_id
         client.log_param(rid, "task", TASK)
         for key, value in {"episode_return": ret, "episode_cost": 1.0 if feasible else 9.0,
-                           "cost_limit": 2.0, "feasible": float(feasible)}.items():
+                           "cost_limit": 2.0, "feasible": float(feasible), **(score or {})}.items():
             client.log_metric(rid, key, value)
         if with_checkpoint:
             client.log_artifacts(rid, checkpoint, artifact_path="checkpoint")
@@ -166,6 +166,10 @@ def mlflow_store(checkpoint, tmp_path_factory):
     runs = {"a": trial(sweep, "a", 1.0, True), "b": trial(sweep, "b", 2.0, True),
             "tampered": trial(sweep, "tampered", 0.5, True), "unverified": trial(sweep, "unverified", 0.4, True),
             "c": trial(sweep, "c", 5.0, False, with_checkpoint=False),
+            # Its last iteration infeasible, its score (what the sweep ranked it on) feasible, but
+            # below b's; and one whose score is infeasible though its last iteration looked best.
+            "e": trial(sweep, "e", 0.1, False, with_checkpoint=False, score={"score_return": 1.5, "score_cost": 1.0}),
+            "f": trial(sweep, "f", 9.0, True, with_checkpoint=False, score={"score_return": 9.0, "score_cost": 3.0}),
             "d": trial(sweep, "d", 0.0, True, with_checkpoint=False)}
     infeasible_sweep = client.create_run(exp, tags={SWEEP_TAG: "1"}).info.run_id
     trial(infeasible_sweep, "x", 3.0, False, with_checkpoint=False)
@@ -211,7 +215,8 @@ def test_cli_best_of_picks_best_feasible_trial(mlflow_store):
                           "--actions", "langevin", "--json", "--no-progress")
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert result["run_id"] == s["b"]  # c has a higher return but is infeasible
+    # c has a higher return but is infeasible; f's last iteration is feasible, its score is not.
+    assert result["run_id"] == s["b"]
     assert "best feasible trial of sweep" in proc.stdout
     metrics = s["client"].get_run(s["b"]).data.metrics
     assert metrics["eval/langevin/return_mean"] == pytest.approx(result["return_mean"])
