@@ -17,6 +17,9 @@ CASES = {
     "sac_lag": {"random_env_steps": 400, "env_steps_per_iteration": 400},
     "sac_lag-shuffled": {"algo": "sac_lag", "random_env_steps": 400, "env_steps_per_iteration": 400,
                          "minibatch_draws": "shuffled_passes"},
+    # The trust-region step on the whole batch, then the critics' minibatch epochs on either path.
+    "trpo_lag": {"num_epochs": 3},
+    "cpo": {"num_epochs": 3},
 }
 
 
