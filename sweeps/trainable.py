@@ -165,9 +165,11 @@ class SweepTrial(tune.Trainable):
             metrics[OBJECTIVE] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])
             metrics[CONSTRAINT] = metrics[EPISODE_COST] - metrics[COST_LIMIT]  # ≤ 0 is feasible
             metrics[WALL_TIME_S] = float(r.get(TIME_TOTAL_S, 0.0))
-            if metrics[ENV_STEPS] > self.logged_up_to:
-                self.tracker.log_metrics(metrics, step=int(metrics[ENV_STEPS]))
             done = metrics[ENV_STEPS] >= self.timesteps
+            if metrics[ENV_STEPS] > self.logged_up_to:
+                # The last step's objective is the trial's score's, logged when the trial finishes.
+                self.tracker.log_metrics({k: v for k, v in metrics.items() if not (done and k == OBJECTIVE)},
+                                         step=int(metrics[ENV_STEPS]))
             every = int(self.config.get("eval_every") or 0)
             if every and not done and (self.iteration + 1) % every == 0 and metrics[ENV_STEPS] > self.logged_up_to:
                 with tempfile.TemporaryDirectory() as tmp:  # the block every K iterations, on a snapshot
@@ -179,6 +181,8 @@ class SweepTrial(tune.Trainable):
                 metrics.update(score)
                 if all(math.isfinite(v) for v in score.values()):
                     metrics[OBJECTIVE] = objective(score[SCORE_RETURN], score[SCORE_COST], metrics[COST_LIMIT])
+                elif metrics[ENV_STEPS] > self.logged_up_to:  # no score: the last iteration's, as every other
+                    self.tracker.log_metrics({OBJECTIVE: metrics[OBJECTIVE]}, step=int(metrics[ENV_STEPS]))
             return {**metrics, "done": done}
         except Exception as e:
             self.tracker.set_tags({ERROR_TAG: f"{type(e).__name__}: {e}"[:4000]})
@@ -209,7 +213,10 @@ class SweepTrial(tune.Trainable):
             metrics = {}
         (ret, cost), used = declared(self.config.get("score", SCORES[0]), train, eval_score(metrics))
         score = {SCORE_RETURN: ret, SCORE_COST: cost}
-        logged = {k: v for k, v in {**score, TRAIN_RETURN: train[0], TRAIN_COST: train[1]}.items() if math.isfinite(v)}
+        # The run's final objective is its score's (what it is ranked on, and what Optuna is told).
+        final = objective(ret, cost, self.algo_config.effective_cost_limit) if math.isfinite(ret + cost) else math.nan
+        logged = {k: v for k, v in {**score, TRAIN_RETURN: train[0], TRAIN_COST: train[1], OBJECTIVE: final}.items()
+                  if math.isfinite(v)}
         if logged:
             self.tracker.log_metrics(logged, step=int(curve[ENV_STEPS].max()))
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint", SCORE_TAG: used})
