@@ -62,9 +62,9 @@ OMNISAFE = {  # OmniSafe's benchmark tables (cost limit 25); per algorithm: swee
                             ("unconstrained SAC (OmniSafe)", (27.04, None), (67.57, None))],
 }
 #: OmniSafe's unconstrained on-policy rows (10M steps, its on-policy table), shown beside a run of
-#: that algorithm with its multiplier pinned at 0 (a variant whose algo is the key).
-UNCONSTRAINED = {"SafetyPointGoal1-v0": {"trpo_lag": ("unconstrained TRPO (OmniSafe), 10M steps", 27.20, 45.88),
-                                         "ppo_lag": ("unconstrained PPO (OmniSafe), 10M steps", 25.44, 55.72)}}
+#: the Lagrangian algorithm named (as sweeps/published.yaml names it) with its multiplier pinned at 0.
+UNCONSTRAINED = {"SafetyPointGoal1-v0": {"TRPO-L": ("unconstrained TRPO (OmniSafe), 10M steps", 27.20, 45.88),
+                                         "PPO-L": ("unconstrained PPO (OmniSafe), 10M steps", 25.44, 55.72)}}
 CURVE_KEYS = ("env_steps", "episode_return", "episode_cost", "cost_limit", "nu", "nu_max",
               "langevin_at_bound", "langevin_clip_fraction", "langevin_grad_norm", "actor_std_mean",
               "time_s")
@@ -239,7 +239,7 @@ def published_rows(task: str, variants: dict, shown: list[str]) -> list[str]:
             if f and not any(n.startswith(f"{name},") for n in shown):
                 lines.append(f"| {name}, {f.steps / 1e6:g}M steps | | {_fmt(*f.return_)} | {_fmt(*f.cost)} | | | |")
     for algo, pinned in variants.values():
-        entry = UNCONSTRAINED.get(task, {}).get(algo)
+        entry = UNCONSTRAINED.get(task, {}).get(pub.algorithms.get(algo, algo))
         if pinned and entry:
             lines.append(f"| {entry[0]} | | {_fmt(entry[1], None)} | {_fmt(entry[2], None)} | | | |")
     return list(dict.fromkeys(lines))
