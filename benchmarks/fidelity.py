@@ -57,8 +57,8 @@ PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)
     "focops/HumanoidCircle-v0": ((925.03, 111.95), (49.57, 1.16)),
 }
 OMNISAFE = {  # OmniSafe's benchmark tables (cost limit 25); per algorithm: sweeps/published.yaml
-    "SafetyPointGoal1-v0": [("OmniSafe SACLag, 3M steps", (21.45, 6.97), (19.17, 9.72)),
-                            ("OmniSafe PPOLag, 10M steps", (12.96, 6.95), (25.80, 34.99)),
+    "SafetyPointGoal1-v0": [("OmniSafe SAC-Lag, 3M steps", (21.45, 6.97), (19.17, 9.72)),
+                            ("OmniSafe PPO-L, 10M steps", (12.96, 6.95), (25.80, 34.99)),
                             ("unconstrained SAC (OmniSafe)", (27.04, None), (67.57, None))],
 }
 #: OmniSafe's unconstrained on-policy rows (10M steps, its on-policy table), shown beside a run of
