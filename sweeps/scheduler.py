@@ -142,9 +142,9 @@ class ConfigurationASHA(FIFOScheduler):
         self.failed.setdefault(key, set()).add(trial.trial_id)
         self.waiting.pop(trial.trial_id, None)
         for rung in self.rungs:
-            for values in [self.values.get((key, rung), {})]:
-                values.pop(trial.trial_id, None)
-            if any(i in self.values.get((key, rung), {}) for i in self.waiting):
+            values = self.values.get((key, rung), {})
+            values.pop(trial.trial_id, None)
+            if any(i in values for i in self.waiting):
                 self._decide(tune_controller, key, rung)
 
     def choose_trial_to_run(self, tune_controller) -> Trial | None:
