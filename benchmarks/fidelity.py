@@ -299,6 +299,8 @@ def plot(df, task: str, order: list[str], path: Path) -> None:
 
     panels = [("episode_return", "episode return"), ("episode_cost", "episode cost"), ("nu", "ν"),
               ("langevin_at_bound", "chain end points at a bound")]
+    # A panel no run has values for (the chain's, in a report of baselines only) is left out.
+    panels = [(k, t) for k, t in panels if k in df and df[k].notna().any()]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = ["-", "--", ":", "-."]

@@ -121,3 +121,20 @@ def test_the_table_shows_the_published_figures_of_the_algorithms_it_ran(fidelity
     assert rows == ["| paper CPO, 2.5M steps | | 23.16 ± 2.09 | 46.00 ± 15.85 | | | |",
                     "| OmniSafe CPO, 10M steps | | 20.46 ± 1.38 | 28.84 ± 7.76 | | | |",
                     "| unconstrained TRPO (OmniSafe), 10M steps | | 27.20 | 45.88 | | | |"]
+
+
+def test_the_plot_leaves_out_a_panel_no_run_has_values_for(fidelity, tmp_path, monkeypatch):
+    """A report of baselines only has no chain to plot: its figure has no empty 'at a bound' panel."""
+    import matplotlib.pyplot as plt
+
+    made = []
+    subplots = plt.subplots
+    monkeypatch.setattr(plt, "subplots", lambda rows, cols, **kw: made.append(cols) or subplots(rows, cols, **kw))
+    _write_run(tmp_path / "baselines", "ppo_lag", 0, [1.0, 2.0])
+    fidelity.report(tmp_path / "baselines", "lac/PointHazard-v0", ["ppo_lag"], None)
+    run = tmp_path / "lac" / "runs" / "lac" / "seed0"
+    _write_run(tmp_path / "lac", "lac", 0, [1.0, 2.0])
+    rows = [{**json.loads(line), "langevin_at_bound": 0.1} for line in (run / "progress.jsonl").read_text().splitlines()]
+    (run / "progress.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    fidelity.report(tmp_path / "lac", "lac/PointHazard-v0", ["lac"], None)
+    assert made == [3, 4]
