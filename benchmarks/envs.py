@@ -15,6 +15,12 @@ ratios to raw.
     python benchmarks/envs.py                       # raw + sampling, every task but CostProbe
     python benchmarks/envs.py --steps 5000 --tasks SafetyPointGoal1-v0 focops/AntVelocity-v0
     python benchmarks/envs.py --raw-only            # part 1 only (no Ray)
+    python benchmarks/envs.py --step-costs          # navigation tasks' step costs (the plan's)
+
+Part 3, ``bench_step_costs``: each Safety-Gymnasium navigation task's raw step time over
+``SafetyPointGoal1-v0``'s, the reference timed just before and after each task so that a change of
+the machine's load falls on both; printed in the layout of ``NAV_STEP_COST``
+(lac_rllib/tasks/safety_gym.py), which the sweep plan reads through ``TaskSpec.step_cost``.
 """
 
 from __future__ import annotations
@@ -151,6 +157,43 @@ def _sampling_steps_per_s(task_id: str, steps: int, seed: int, warmup: int, num_
     return sampled / seconds, episodes
 
 
+def bench_step_costs(steps: int = 1000, seed: int = 0, reference: str = "SafetyPointGoal1-v0") -> dict:
+    """{(task, robot): a raw step's time over the reference's} for every navigation task
+    (module docstring, part 3); prints the table in ``NAV_STEP_COST``'s layout."""
+    from lac_rllib.tasks.safety_gym import NAV_OBS_DIMS, NAV_ROBOTS, nav_id
+
+    ref = get_task(reference).make()
+    ref.reset(seed=seed)
+    _seconds_of(ref, steps // 5, seed)
+    costs = {}
+    for task in NAV_OBS_DIMS:
+        for robot in NAV_ROBOTS:
+            env = get_task(nav_id(robot, task)).make()
+            env.reset(seed=seed)
+            _seconds_of(env, steps // 5, seed)  # warm (a fresh env's first steps run slower)
+            before = _seconds_of(ref, steps, seed)
+            seconds = _seconds_of(env, steps, seed)
+            after = _seconds_of(ref, steps, seed)
+            env.close()
+            costs[task, robot] = seconds / (0.5 * (before + after))
+        cells = ", ".join(f"{costs[task, r]:.2g}" if costs[task, r] < 10 else f"{costs[task, r]:.0f}" for r in NAV_ROBOTS)
+        print(f'    "{task}": ({cells}),', flush=True)
+    ref.close()
+    return costs
+
+
+def _seconds_of(env, steps: int, seed: int) -> float:
+    """Seconds of ``steps`` random-action steps of ``env`` (resets on episode end included)."""
+    env.action_space.seed(seed)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    t0 = time.perf_counter()
+    for action in actions:
+        _, _, term, trunc, _ = env.step(action)
+        if term or trunc:
+            env.reset()
+    return time.perf_counter() - t0
+
+
 def _print_sampling_table(rows: list[dict]) -> None:
     header = (f"{'task':<30} {'raw steps/s':>11} {'1 env':>8} {'ratio':>6} {'envs':>4} {'N envs':>8} "
               f"{'ratio':>6} {'steps':>6}")
@@ -183,12 +226,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=3000, help="timed steps per task and measurement")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--raw-only", action="store_true", help="only the raw env table (part 1)")
+    parser.add_argument("--step-costs", action="store_true",
+                        help="only the navigation tasks' step costs over SafetyPointGoal1-v0's (part 3)")
     args = parser.parse_args(argv)
     tasks = [*args.positional_tasks, *args.tasks] or None
     for task_id in tasks or []:
         get_task(task_id)  # unknown id -> ValueError listing the known ones, before any work
     print(runtime_versions())
-    if args.raw_only:
+    if args.step_costs:
+        bench_step_costs(args.steps, args.seed)
+    elif args.raw_only:
         bench_raw(tasks, args.steps, args.seed)
     else:
         bench_sampling(tasks, args.steps, args.seed)

@@ -41,6 +41,18 @@ from sweeps.tracking import check_reachable, default_tracking_uri
 # update's seconds per env step (``plan_update_s`` in its folder, read through the registry).
 RATE = {"tiny": 405.0, "safety_gym": 377.0, "mujoco": 185.0}
 STARTUP_S = 15.0
+#: The envs per runner each preset's RATE holds at (the presets' own: the tiny task's quick trials
+#: and the Safety-Gymnasium presets sample 10 envs per runner, the MuJoCo presets 5).
+RATE_ENVS = {"tiny": 10, "safety_gym": 10, "mujoco": 5}
+#: The env's share of a sampled step's time at one env per runner; the rest (the policy's forward,
+#: RLlib's per-step work) a vector env of N envs divides by N. From PointGoal1's sampling, 202 steps/s
+#: at one env and 450 at ten (docs/speed.md, "Sampling"): s + (1 - s)/10 = 202/450. A task's
+#: ``step_cost`` scales this share.
+ENV_SHARE = 0.39
+#: The same share in an evaluation block (one env, the policy's forward a step, none of RLlib's
+#: sampling machinery): PointButton1's blocks took 2.7x PointGoal1's at a step cost of 3.3 in the
+#: table2 quick sweep (docs/sweeps.md, "What the plan's estimate is").
+EVAL_ENV_SHARE = 0.75
 #: The command's name in its help and errors: the console script, or the file as ``python`` ran it.
 PROG = "lac-sweep" if Path(sys.argv[0]).name == "lac-sweep" else "sweeps/run.py"
 #: The most trials a sweep may plan unless --max-trials says more: counted before any is built
@@ -470,16 +482,38 @@ def check_optuna_study(url: str, name: str, resume: bool) -> None:
                          f"delete it (optuna delete-study --storage {url} --study-name {name})")
 
 
-def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
-    """Rough wall seconds of one trial of ``steps`` env steps whose fields are ``params``
-    (``spaces.trial_params``): start-up, then env steps at the preset's measured rate, plus the
-    algorithm's own update share (LAC's chain grows with T; measured on this project's 2-core
-    machine)."""
+def seconds_per_env_step(task: str, envs: int | None = None) -> float:
+    """Rough seconds of one sampled env step of ``task`` at ``envs`` envs per runner (None: the
+    rate's own): its preset's rate, the env's share scaled by the task's ``step_cost`` (a Button1
+    step costs ~3 Goal1 steps), the rest divided over the vector env's envs."""
     from lac_rllib.tasks import get_task
 
-    preset = get_task(task).preset
-    extra = plan_update_s(params.get(ALGO_FIELD, DEFAULT_ALGO), params, preset) * steps
-    return STARTUP_S + (steps / RATE.get(preset, min(RATE.values())) + extra) / cpus ** 0.5
+    spec = get_task(task)
+    ref = RATE_ENVS.get(spec.preset, 1)
+    n = envs or ref
+    at = (ENV_SHARE * spec.step_cost + (1 - ENV_SHARE) / n) / (ENV_SHARE + (1 - ENV_SHARE) / ref)
+    return at / RATE.get(spec.preset, min(RATE.values()))
+
+
+def eval_seconds_per_env_step(task: str) -> float:
+    """Rough seconds of one evaluation step of ``task``: its preset's rate, the env's share
+    (``EVAL_ENV_SHARE``) scaled by the task's ``step_cost``."""
+    from lac_rllib.tasks import get_task
+
+    spec = get_task(task)
+    return (1 + EVAL_ENV_SHARE * (spec.step_cost - 1)) / RATE.get(spec.preset, min(RATE.values()))
+
+
+def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
+    """Rough wall seconds of one trial of ``steps`` env steps whose fields are ``params``
+    (``spaces.trial_params``): start-up, then env steps at the task's rate
+    (:func:`seconds_per_env_step`), plus the algorithm's own update share (LAC's chain grows with
+    T; measured on this project's 2-core machine)."""
+    from lac_rllib.tasks import get_task
+
+    extra = plan_update_s(params.get(ALGO_FIELD, DEFAULT_ALGO), params, get_task(task).preset) * steps
+    envs = params.get("num_envs_per_env_runner")
+    return STARTUP_S + (steps * seconds_per_env_step(task, envs) + extra) / cpus ** 0.5
 
 
 #: Steps per episode the plan assumes for the evaluation block (the task presets' episode limits:
@@ -490,7 +524,7 @@ EPISODE_STEPS = {"tiny": 100, "safety_gym": 1000, "mujoco": 1000}
 def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> float:
     """Rough seconds of a trial's evaluation blocks (sweeps/trainable.py): ``eval_episodes``
     episodes per mode its algorithm has, at the end and every ``eval_every`` iterations, at the
-    preset's rate (one env, one policy forward a step: no faster than training's sampling)."""
+    task's rate (one env, one policy forward a step: no faster than training's sampling)."""
     from lac_rllib.algorithms.registry import actions
     from lac_rllib.tasks import get_task
 
@@ -501,8 +535,7 @@ def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> fl
     modes = [m for m in sweep.eval_modes or ("generator", "stochastic") if m == "stochastic" or m in actions(algo)]
     per_iteration = params.get("env_steps_per_iteration") or params.get("train_batch_size_per_learner") or 0
     blocks = 1 + (int(steps // per_iteration) // sweep.eval_every if sweep.eval_every and per_iteration else 0)
-    preset = get_task(task).preset
-    return blocks * len(modes) * episodes * EPISODE_STEPS.get(preset, 1000) / RATE.get(preset, min(RATE.values()))
+    return blocks * len(modes) * episodes * EPISODE_STEPS.get(get_task(task).preset, 1000) * eval_seconds_per_env_step(task)
 
 
 def eval_share_of(evals: list[float], per_trial: list[float], trials, calibration) -> float:

@@ -48,6 +48,11 @@ class TaskSpec:
     #: The task's family (Safety-Gymnasium's task without its level: ``Goal``, ``Button``, ...; empty
     #: for others): an algorithm may set fields per family (``TASK_FAMILY_OVERRIDES``).
     family: str = ""
+    #: One env step's time over one of its preset's reference task (Safety-Gymnasium's navigation
+    #: tasks: ``SafetyPointGoal1-v0``), raw steps with random actions as ``benchmarks/envs.py
+    #: --step-costs`` measures them: the sweep plan scales the env's share of a trial by it (a
+    #: Button1 step costs ~4 Goal1 steps, docs/sweeps.md). 1.0 where not measured.
+    step_cost: float = 1.0
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""

@@ -154,6 +154,28 @@ NAV_OBS_DIMS: dict[str, tuple[int, int, int, int, int]] = {
     "Run0": (12, 24, 56, 12, 40),
 }
 
+#: A raw env step's time per navigation task over ``SafetyPointGoal1-v0``'s (TaskSpec.step_cost, what
+#: the sweep plan scales the env's share of a trial by), robots in NAV_ROBOTS' order: random actions,
+#: 1,000 steps each, the reference timed before and after each task (``python benchmarks/envs.py
+#: --step-costs``; AMD EPYC, 2026-12-03, beside a sweep: ±20%). Button, Goal2 and the Ant's and
+#: Racecar's heavier bodies step 3-18x slower than PointGoal1; Point on level 0, Circle and Run 3x faster.
+NAV_STEP_COST: dict[str, tuple[float, float, float, float, float]] = {
+    #          Point Car Doggo Racecar Ant
+    "Goal0": (0.37, 0.74, 1.9, 2.3, 2.4),
+    "Goal1": (1.0, 1.3, 2.7, 3.4, 3.3),  # the reference: measured 0.89 against itself
+    "Goal2": (3.8, 4.7, 6.0, 9.8, 9.1),
+    "Button0": (0.84, 1.3, 2.4, 3.4, 2.7),
+    "Button1": (3.3, 4.5, 4.5, 7.6, 16),
+    "Button2": (4.6, 5.6, 5.5, 7.4, 18),
+    "Push0": (1.0, 1.6, 2.8, 4.4, 4.4),
+    "Push1": (1.3, 2.1, 2.8, 4.5, 5.1),
+    "Push2": (2.0, 2.3, 3.8, 5.2, 5.5),
+    "Circle0": (0.29, 0.89, 1.8, 2.8, 2.3),
+    "Circle1": (0.36, 0.8, 1.8, 2.3, 2.7),
+    "Circle2": (0.35, 0.79, 1.7, 2.3, 2.3),
+    "Run0": (0.28, 0.63, 1.8, 2.5, 2.4),
+}
+
 #: What makes ``info["cost"]`` 1 (safety_gymnasium/tasks/safe_navigation/*/: the constrained
 #: objects each level adds; level 0 has none, its cost is always 0, except Run0's walls).
 NAV_COSTS: dict[str, str] = {
@@ -221,6 +243,7 @@ def _nav(robot: str, task: str) -> TaskSpec:
         cost_source=f'safety_gymnasium info["cost"] in {{0,1}} ({NAV_COSTS[task]}), summed',
         kwargs={"env_id": env_id},
         family=_family(task),
+        step_cost=NAV_STEP_COST[task][list(NAV_ROBOTS).index(robot)],
     )
 
 

@@ -56,16 +56,18 @@ def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypat
 
     chain = CHAIN_S_PER_STEP["safety_gym"] * steps
 
+    step_s = cli.seconds_per_env_step("SafetyPointButton1-v0", 10)  # the preset's 10 envs per runner
+
     def formula(t):  # one trial, 1 CPU: the estimate is this trial's, its evaluation block included
-        evaluation = 2 * 10 * cli.EPISODE_STEPS["safety_gym"] / cli.RATE["safety_gym"]  # 2 modes x 10 episodes
-        return cli.STARTUP_S + steps / cli.RATE["safety_gym"] + chain * t + evaluation
+        evaluation = 2 * 10 * cli.EPISODE_STEPS["safety_gym"] * cli.eval_seconds_per_env_step("SafetyPointButton1-v0")
+        return cli.STARTUP_S + steps * step_s + chain * t + evaluation
 
     args = ("--space", "paper", "--task", "SafetyPointButton1-v0", "--budget", "paper", "--seeds", "1")
     plan = _plan(tmp_path, monkeypatch, *args)
     (trial,) = plan.trials
     assert trial.params["langevin_steps"] == 50
     assert plan.estimated_wall_s == pytest.approx(formula(50))
-    assert formula(50) > 1.3 * formula(30)  # T = 30 would count ~2 hours less
+    assert formula(50) - formula(30) > 1.5 * 3600  # T = 30 would count ~2 hours less
     assert plan.estimated_cpu_h == pytest.approx(formula(50) / 3600)
     plan = _plan(tmp_path, monkeypatch, *args, "--set", "langevin_steps=70")
     assert plan.trials[0].params["langevin_steps"] == 70
@@ -196,6 +198,38 @@ def test_on_a_cluster_the_wall_time_is_estimated_again_at_its_cpus(tmp_path, mon
     assert "cluster: 48 CPUs -> 24 trials at once; estimated wall time ~" in capsys.readouterr().out
 
 
+def test_a_slower_env_is_counted_by_its_step_cost(tmp_path, monkeypatch):
+    """A Button1 step costs ~3 Goal1 steps (TaskSpec.step_cost): the env's share of the trial's
+    time (training and evaluation) grows by it, the algorithm's update share does not."""
+    from lac_rllib.tasks import get_task
+
+    goal, button = get_task("SafetyPointGoal1-v0"), get_task("SafetyPointButton1-v0")
+    assert goal.step_cost == 1.0 and button.step_cost > 2.5  # the reference, and a slower task
+    assert cli.seconds_per_env_step(goal.id) == pytest.approx(1 / cli.RATE["safety_gym"])  # the rate's own
+    assert cli.seconds_per_env_step(button.id) == pytest.approx(cli.seconds_per_env_step(goal.id) * (
+        1 + cli.ENV_SHARE * (button.step_cost - 1) / (cli.ENV_SHARE + (1 - cli.ENV_SHARE) / 10)))
+    assert cli.eval_seconds_per_env_step(button.id) == pytest.approx(
+        (1 + cli.EVAL_ENV_SHARE * (button.step_cost - 1)) / cli.RATE["safety_gym"])
+    f = tmp_path / "s.yaml"
+
+    def wall(task):
+        f.write_text(f"task: {task}\nbudget: 40000\nseeds: 1\nalgo: ppo_lag\n")
+        return _plan(tmp_path, monkeypatch, "--config", str(f)).estimated_wall_s
+
+    # training at PPO-Lag's 10 envs per runner, then 2 modes x 10 episodes of evaluation
+    extra = ((cli.seconds_per_env_step(button.id, 10) - cli.seconds_per_env_step(goal.id, 10)) * 40_000
+             + (cli.eval_seconds_per_env_step(button.id) - cli.eval_seconds_per_env_step(goal.id)) * 20_000)
+    assert wall(button.id) - wall(goal.id) == pytest.approx(extra)
+    assert extra > 0.5 * (wall(goal.id) - cli.STARTUP_S)  # a difference a user would see
+
+
+def test_one_env_per_runner_samples_slower_than_the_presets_ten():
+    """The rate holds at the preset's envs per runner; one env (SAC-Lag's, the quick budget's) pays
+    the policy's forward and RLlib's per-step work on every step: ~2x slower per step."""
+    one, ten = cli.seconds_per_env_step("SafetyPointGoal1-v0", 1), cli.seconds_per_env_step("SafetyPointGoal1-v0", 10)
+    assert one / ten == pytest.approx(1 / (cli.ENV_SHARE + (1 - cli.ENV_SHARE) / 10)) and 1.8 < one / ten < 2.6
+
+
 def test_the_estimate_counts_the_evaluation_blocks(tmp_path, monkeypatch, capsys):
     f = tmp_path / "e.yaml"
 
@@ -207,7 +241,7 @@ def test_the_estimate_counts_the_evaluation_blocks(tmp_path, monkeypatch, capsys
     assert none.eval_share == 0.0 and 0 < end.eval_share < every.eval_share
     # 2 modes x 10 episodes x 1,000 steps at the preset's rate, once at the end; PPO-Lag's 20k-step
     # iterations at 40k steps: with eval_every 1, 2 more blocks.
-    block = 2 * 10 * 1000 / cli.RATE["safety_gym"]
+    block = 2 * 10 * 1000 * cli.eval_seconds_per_env_step("SafetyPointGoal1-v0")
     assert end.estimated_wall_s - none.estimated_wall_s == pytest.approx(block)
     assert every.estimated_wall_s - none.estimated_wall_s == pytest.approx(3 * block)
     cli.print_plan(end)

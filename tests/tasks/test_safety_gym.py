@@ -390,3 +390,15 @@ def test_doggo_and_ant_robots_build_with_the_angle_sensor_fix():
         env = get_task(task_id).make()
         obs, _ = env.reset(seed=0)
         assert obs.shape == (get_task(task_id).obs_dim,) and np.all(np.isfinite(obs))
+
+
+def test_every_navigation_task_declares_its_step_cost():
+    """The sweep plan's per-task step cost (TaskSpec.step_cost): PointGoal1 is the reference, every
+    navigation id has its measured value, and a Button1 step costs more than a Goal1 step per robot."""
+    nav = [t for t in _safety_ids() if "Velocity" not in t]
+    assert get_task("SafetyPointGoal1-v0").step_cost == 1.0
+    assert all(0.1 < get_task(t).step_cost < 50 for t in nav)
+    assert len({get_task(t).step_cost for t in nav}) > 30  # measured per id, not one default
+    for robot in safety_gym.NAV_ROBOTS:
+        goal, button = (get_task(safety_gym.nav_id(robot, task)).step_cost for task in ("Goal1", "Button1"))
+        assert button > goal, robot
