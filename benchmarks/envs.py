@@ -176,7 +176,7 @@ def bench_step_costs(steps: int = 1000, seed: int = 0, reference: str = "SafetyP
             after = _seconds_of(ref, steps, seed)
             env.close()
             costs[task, robot] = seconds / (0.5 * (before + after))
-        cells = ", ".join(f"{costs[task, r]:.2g}" if costs[task, r] < 10 else f"{costs[task, r]:.0f}" for r in NAV_ROBOTS)
+        cells = ", ".join(f"{c:.2g}" if c < 10 else f"{c:.0f}" for c in (costs[task, r] for r in NAV_ROBOTS))
         print(f'    "{task}": ({cells}),', flush=True)
     ref.close()
     return costs

@@ -535,7 +535,8 @@ def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> fl
     modes = [m for m in sweep.eval_modes or ("generator", "stochastic") if m == "stochastic" or m in actions(algo)]
     per_iteration = params.get("env_steps_per_iteration") or params.get("train_batch_size_per_learner") or 0
     blocks = 1 + (int(steps // per_iteration) // sweep.eval_every if sweep.eval_every and per_iteration else 0)
-    return blocks * len(modes) * episodes * EPISODE_STEPS.get(get_task(task).preset, 1000) * eval_seconds_per_env_step(task)
+    episode_steps = EPISODE_STEPS.get(get_task(task).preset, 1000)
+    return blocks * len(modes) * episodes * episode_steps * eval_seconds_per_env_step(task)
 
 
 def eval_share_of(evals: list[float], per_trial: list[float], trials, calibration) -> float:

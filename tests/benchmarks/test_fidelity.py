@@ -134,7 +134,8 @@ def test_the_plot_leaves_out_a_panel_no_run_has_values_for(fidelity, tmp_path, m
     fidelity.report(tmp_path / "baselines", "lac/PointHazard-v0", ["ppo_lag"], None)
     run = tmp_path / "lac" / "runs" / "lac" / "seed0"
     _write_run(tmp_path / "lac", "lac", 0, [1.0, 2.0])
-    rows = [{**json.loads(line), "langevin_at_bound": 0.1} for line in (run / "progress.jsonl").read_text().splitlines()]
+    lines = (run / "progress.jsonl").read_text().splitlines()
+    rows = [{**json.loads(line), "langevin_at_bound": 0.1} for line in lines]
     (run / "progress.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     fidelity.report(tmp_path / "lac", "lac/PointHazard-v0", ["lac"], None)
     assert made == [3, 4]
