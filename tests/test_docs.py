@@ -119,6 +119,7 @@ def test_nothing_points_outside_the_repository():
 
 # A path of this repository named in the docs or the code, e.g. `lac_rllib/algorithms/lac/learner.py`.
 REPO_PATH = re.compile(r"\b((?:lac_rllib|sweeps|tests|benchmarks|docs)/[\w./-]*\w)")
+URL = re.compile(r"https?://[^\s)\]>\"']+")
 
 
 def test_every_repository_path_named_exists():
@@ -128,7 +129,10 @@ def test_every_repository_path_named_exists():
     bad = []
     for path in sorted(set(cited_files() + docs + [ROOT / "README.md"])):
         for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            urls = [u.span() for u in URL.finditer(line)]  # another repository's paths (a link's)
             for m in REPO_PATH.finditer(line):
+                if any(a <= m.start() < b for a, b in urls):
+                    continue
                 target = m.group(1).split("::")[0].rstrip(".")
                 if not (ROOT / target).exists() and "*" not in target and "<" not in target:
                     bad.append(f"{rel(path)}:{n}: {target}")
