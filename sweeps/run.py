@@ -492,7 +492,7 @@ def seconds_per_env_step(task: str, envs: int | None = None) -> float:
     ref = RATE_ENVS.get(spec.preset, 1)
     n = envs or ref
     at = (ENV_SHARE * spec.step_cost + (1 - ENV_SHARE) / n) / (ENV_SHARE + (1 - ENV_SHARE) / ref)
-    return at / RATE.get(spec.preset, min(RATE.values()))
+    return at / _rate(spec.preset)
 
 
 def eval_seconds_per_env_step(task: str) -> float:
@@ -501,7 +501,12 @@ def eval_seconds_per_env_step(task: str) -> float:
     from lac_rllib.tasks import get_task
 
     spec = get_task(task)
-    return (1 + EVAL_ENV_SHARE * (spec.step_cost - 1)) / RATE.get(spec.preset, min(RATE.values()))
+    return (1 + EVAL_ENV_SHARE * (spec.step_cost - 1)) / _rate(spec.preset)
+
+
+def _rate(preset: str) -> float:
+    """``RATE`` of ``preset``; an unknown preset (a user env's) gets the slowest."""
+    return RATE.get(preset, min(RATE.values()))
 
 
 def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
@@ -524,7 +529,7 @@ EPISODE_STEPS = {"tiny": 100, "safety_gym": 1000, "mujoco": 1000}
 def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> float:
     """Rough seconds of a trial's evaluation blocks (sweeps/trainable.py): ``eval_episodes``
     episodes per mode its algorithm has, at the end and every ``eval_every`` iterations, at the
-    task's rate (one env, one policy forward a step: no faster than training's sampling)."""
+    task's evaluation rate (:func:`eval_seconds_per_env_step`: one env, a policy forward a step)."""
     from lac_rllib.algorithms.registry import actions
     from lac_rllib.tasks import get_task
 
