@@ -136,9 +136,9 @@ def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path,
     """langevin_dtype=auto is bfloat16 on a CPU with native bf16 and float32 elsewhere: config.json
     says which this run used, and a resume where it resolves otherwise is refused (other numerics);
     a run that recorded no resolution (before it was recorded) still resumes."""
-    import lac_rllib.algorithms.lac.energy as energy
+    import lac_rllib.constrained.precision as precision
 
-    monkeypatch.setattr(energy, "cpu_flags", lambda: {"avx2", "avx512_bf16"})
+    monkeypatch.setattr(precision, "cpu_flags", lambda: {"avx2", "avx512_bf16"})
     config = build_config("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
     started = run_config(config)
     assert started["langevin_dtype"] == "auto" and started["resolved"] == {"langevin_dtype": "bfloat16"}
@@ -146,7 +146,7 @@ def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path,
     _fake_checkpoint(tmp_path, config)
     check_output(str(tmp_path), config, resume=True)  # same machine kind: resumes
 
-    monkeypatch.setattr(energy, "cpu_flags", lambda: {"avx2"})
+    monkeypatch.setattr(precision, "cpu_flags", lambda: {"avx2"})
     elsewhere = build_config("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
     assert elsewhere.resolved() == {"langevin_dtype": "float32"}
     refused = r"resolved=\{'langevin_dtype': 'bfloat16'\} \(now \{'langevin_dtype': 'float32'\}\)"

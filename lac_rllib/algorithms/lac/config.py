@@ -16,8 +16,6 @@ from typing import Any
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.lac.energy import DTYPE_CHOICES as LANGEVIN_DTYPES
-from lac_rllib.algorithms.lac.energy import resolve_dtype
 from lac_rllib.algorithms.lac.langevin import CLIP_MODES, INFORMATIVE, STARTS
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.cpus import check_cpus, run_resources, runner_cpus, set_runners, use_cpus  # noqa: F401
@@ -36,6 +34,8 @@ from lac_rllib.constrained.fields import (
 )
 from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.off_policy_config import OffPolicyConfig
+from lac_rllib.constrained.precision import DTYPE_CHOICES as LANGEVIN_DTYPES
+from lac_rllib.constrained.precision import resolve_dtype
 from lac_rllib.constrained.task_config import SafeTaskParams
 
 CHAIN_AT = ("next", "current")
@@ -238,7 +238,7 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
 
     def resolved(self) -> dict[str, Any]:
         """``langevin_dtype`` as the chain runs it here: "auto" is bfloat16 on a CPU with native bf16
-        matmuls, else float32 (lac_rllib.algorithms.lac.energy.resolve_dtype)."""
+        matmuls, else float32 (lac_rllib.constrained.precision.resolve_dtype)."""
         return {"langevin_dtype": resolve_dtype(self.langevin_dtype)}
 
     def lac_params(self) -> dict[str, Any]:

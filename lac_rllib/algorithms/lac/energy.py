@@ -34,34 +34,9 @@ import torch
 
 from lac_rllib.constrained import networks
 from lac_rllib.constrained.networks import CriticEnsemble, cost_rows, reward_rows
+from lac_rllib.constrained.precision import DTYPES, TORCH_DTYPES
 
-DTYPES = ("float32", "bfloat16")
-#: What the ``langevin_dtype`` field accepts: a dtype, or "auto" (:func:`resolve_dtype`).
-DTYPE_CHOICES = (*DTYPES, "auto")
-_TORCH_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
-#: CPU flags (Linux /proc/cpuinfo) of native bfloat16 matmuls: AVX512-BF16 or AMX.
-BF16_FLAGS = ("avx512_bf16", "amx_bf16")
 logger = logging.getLogger(__name__)
-
-
-def cpu_flags() -> set[str]:
-    """This CPU's feature flags as Linux reports them (empty where /proc/cpuinfo is not there)."""
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return set()
-
-
-def resolve_dtype(name: str) -> str:
-    """``name``, with "auto" as "bfloat16" on a CPU with native bf16 matmuls and "float32"
-    elsewhere (where bf16 runs 30-50x slower: docs/speed.md)."""
-    if name == "auto":
-        return "bfloat16" if cpu_flags() & set(BF16_FLAGS) else "float32"
-    return name
 
 
 # ----- The pieces both paths share -----
@@ -180,7 +155,7 @@ def make_grad_fn(critics, proj: torch.Tensor, mean: torch.Tensor, log_std: torch
     """
     if dtype not in DTYPES:
         raise ValueError(f"dtype={dtype!r}; accepted: {' | '.join(DTYPES)}")
-    mm_dtype = _TORCH_DTYPES[dtype]
+    mm_dtype = TORCH_DTYPES[dtype]
     weights, biases = [w.detach() for w in critics.weights], [b.detach() for b in critics.biases]
     w_a = weights[0][:, critics.obs_dim:]
     ws = [w.to(mm_dtype) for w in weights[1:]]

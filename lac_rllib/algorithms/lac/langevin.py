@@ -26,8 +26,9 @@ from typing import Callable
 
 import torch
 
-from lac_rllib.algorithms.lac.energy import DTYPES, eager_grad_fn, make_grad_fn
+from lac_rllib.algorithms.lac.energy import eager_grad_fn, make_grad_fn
 from lac_rllib.constrained.networks import CriticEnsemble, cost_rows, reward_rows
+from lac_rllib.constrained.precision import DTYPES
 
 GradFn = Callable[[torch.Tensor], "tuple[torch.Tensor, torch.Tensor]"]
 # Where a chain starts (the ``langevin_start`` field): ã_0 ~ π_φ'(·|s) (eq. 11), or N(0, I) (NI).

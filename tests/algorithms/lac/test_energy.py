@@ -107,12 +107,13 @@ def test_auto_dtype_is_bfloat16_only_with_native_bf16_matmuls(monkeypatch):
 
     from lac_rllib.algorithms.lac.config import LACConfig
     from lac_rllib.algorithms.lac.module import chain_settings
+    from lac_rllib.constrained import precision
 
     cfg = {**LACConfig().training(langevin_dtype="auto").lac_params()}
     space = gym.spaces.Box(-1.0, 1.0, (2,))
     for flags, expected in (({"avx2", "avx512f"}, "float32"), ({"avx2", "avx512_bf16"}, "bfloat16"),
                             ({"amx_bf16"}, "bfloat16"), (set(), "float32")):
-        monkeypatch.setattr(energy_module, "cpu_flags", lambda flags=flags: flags)
-        assert energy_module.resolve_dtype("auto") == expected
+        monkeypatch.setattr(precision, "cpu_flags", lambda flags=flags: flags)
+        assert precision.resolve_dtype("auto") == expected
         assert chain_settings(cfg, space).dtype == expected  # decided where the module is built
-    assert energy_module.resolve_dtype("float32") == "float32"  # an explicit dtype is kept
+    assert precision.resolve_dtype("float32") == "float32"  # an explicit dtype is kept
