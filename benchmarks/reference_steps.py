@@ -9,7 +9,8 @@ measures the same work.
   module's three MLPs and free log σ, one torch Adam and one global-norm clip per network;
 - :class:`SACLagStep`: SAC-Lag's step in OmniSafe's order (the critics on their targets, then on a
   policy-delay step the actor on the stepped critics and Polyak), on a copy of the module's own
-  torch networks (its ensembles and actor: plain torch already), fused Adam as the learner's.
+  torch networks (its ensembles and actor: plain torch already, the critics in the module's
+  ``critic_dtype``), fused Adam as the learner's.
 
 :func:`matmul_seconds` is a step's floor: the time spent inside its matrix products (torch's
 profiler, self time of ``mm``/``addmm``/``bmm``/``baddbmm``).
@@ -79,10 +80,11 @@ class SACLagStep:
 
     def __init__(self, module, config):
         from lac_rllib.algorithms.sac_lag.learner import actor_loss, critic_targets  # plain functions
+        from lac_rllib.algorithms.sac_lag.networks import squash
 
         self.m = copy.deepcopy(module)
         self.config, self.updates, self.minibatch_rows = config, 0, config.batch_size
-        self.critic_targets, self.actor_loss = critic_targets, actor_loss
+        self.critic_targets, self.actor_loss, self.squash = critic_targets, actor_loss, squash
         self.critics = [list(self.m.reward_critics.parameters()), list(self.m.cost_critic.parameters())]
         self.critic_optimizers = [torch.optim.Adam(ps, lr=config.critic_lr, fused=True) for ps in self.critics]
         self.actor_optimizer = torch.optim.Adam(self.m.actor.parameters(), lr=config.actor_lr, fused=True)
@@ -90,9 +92,11 @@ class SACLagStep:
     def critic_loss(self, b: dict) -> torch.Tensor:
         obs, act, next_obs = b["obs"], b["actions"], b["new_obs"]
         with torch.no_grad():
-            next_act, logp_next = self.m.sample_action(next_obs)
+            mean, log_std = self.m.actor(next_obs)
+            next_act, logp_next = self.m._sample(mean, log_std)
+            next_det = self.squash(mean, self.m.action_low, self.m.action_high)
             out = {"q_reward_next": self.m.target_reward_critics(next_obs, next_act), "logp_next": logp_next,
-                   "q_cost_next": self.m.target_cost_critic(next_obs, self.m.deterministic_action(next_obs))[0]}
+                   "q_cost_next": self.m.target_cost_critic(next_obs, next_det)[0]}
         q_r, q_c = self.m.reward_critics(obs, act), self.m.cost_critic(obs, act)[0]
         y_r, y_c = self.critic_targets(b, out, self.config)
         return ((q_r - y_r) ** 2).mean(-1).sum() + ((q_c - y_c) ** 2).mean()

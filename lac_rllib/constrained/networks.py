@@ -121,9 +121,14 @@ class CriticEnsemble(nn.Module):
     """
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256, 256),
-                 n_reward: int = 2, n_cost: int = 2, activation: str = "mish"):
+                 n_reward: int = 2, n_cost: int = 2, activation: str = "mish",
+                 matmul_dtype: torch.dtype = torch.float32):
         super().__init__()
         _check_activation(activation)
+        if matmul_dtype not in (torch.float32, torch.bfloat16):
+            raise ValueError(f"matmul_dtype={matmul_dtype}; accepted: torch.float32, torch.bfloat16")
+        #: The input dtype of :meth:`forward`'s hidden layers (SAC-Lag's ``critic_dtype``).
+        self.matmul_dtype = matmul_dtype
         if n_reward < 1 or n_cost < 0:
             raise ValueError(f"n_reward={n_reward}, n_cost={n_cost}; need n_reward ≥ 1, n_cost ≥ 0")
         self.obs_dim, self.act_dim = obs_dim, act_dim
@@ -159,10 +164,22 @@ class CriticEnsemble(nn.Module):
         return z.squeeze(-1)
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-        """Q values of every member → (E, B)."""
+        """Q values of every member → (E, B).
+
+        With ``matmul_dtype`` bfloat16 the hidden layers multiply in bfloat16 (the weights cast at
+        each call: the parameters, their gradients and the optimizer stay float32) and the output
+        layer in float32, so that Q itself is not rounded to bfloat16's 8 bits; float32 is the
+        plain forward, unchanged."""
         x = torch.cat([obs, act], dim=-1)
         x = x.expand(self.n_members, *x.shape)
-        return self._tail(torch.baddbmm(self.biases[0], x, self.weights[0]))
+        if self.matmul_dtype == torch.float32:
+            return self._tail(torch.baddbmm(self.biases[0], x, self.weights[0]))
+        dtype, fn = self.matmul_dtype, _ACT_FNS[self.activation]
+        weights, biases = list(self.weights), list(self.biases)
+        z = x.to(dtype)
+        for w, b in zip(weights[:-1], biases[:-1]):
+            z = fn(torch.baddbmm(b.to(dtype), z, w.to(dtype)))
+        return torch.baddbmm(biases[-1], z.float(), weights[-1]).squeeze(-1)
 
     # --- manual action gradient -------------------------------------------------------------
     @torch.no_grad()

@@ -59,11 +59,13 @@ def test_ppo_lags_plain_torch_step_computes_the_learners_loss_and_gradients(ray_
         algo.stop()
 
 
-def test_sac_lags_plain_torch_step_computes_the_learners_losses_and_gradients(ray_session, reference):
-    algo = build_config("sac_lag", TASK, 0, {}, timesteps=100_000).build_algo()
+@pytest.mark.parametrize("critic_dtype", ["float32", "bfloat16"])
+def test_sac_lags_plain_torch_step_computes_the_learners_losses_and_gradients(ray_session, reference, critic_dtype):
+    algo = build_config("sac_lag", TASK, 0, {"critic_dtype": critic_dtype}, timesteps=100_000).build_algo()
     try:
         learner = algo.learner_group._learner
         module = learner.module[MID].unwrapped()
+        assert str(module.reward_critics.matmul_dtype) == f"torch.{critic_dtype}"
         with torch.no_grad():
             module.nu.fill_(0.5)
         ref = reference.SACLagStep(module, learner.config)

@@ -147,3 +147,28 @@ def test_actor_mean_head_init_is_scaled_and_unbiased():
     torch.testing.assert_close(small.mean_net[-1].weight, 0.1 * plain.mean_net[-1].weight)
     assert torch.count_nonzero(small.mean_net[-1].bias) == 0 and torch.count_nonzero(plain.mean_net[-1].bias) > 0
     torch.testing.assert_close(small.mean_net[0].weight, plain.mean_net[0].weight)  # the body is untouched
+
+
+def test_bfloat16_hidden_layers_keep_q_and_the_gradients_float32():
+    """SAC-Lag's critic_dtype: the hidden layers multiply in bfloat16, the output layer in float32,
+    so Q and every parameter's gradient are float32 and within bfloat16's rounding of the float32
+    ensemble's; the default float32 forward is the plain one."""
+    torch.manual_seed(0)
+    full = CriticEnsemble(OBS, ACT, (64, 64), n_reward=2, n_cost=1, activation="relu")
+    half = CriticEnsemble(OBS, ACT, (64, 64), n_reward=2, n_cost=1, activation="relu", matmul_dtype=torch.bfloat16)
+    half.load_state_dict(full.state_dict())
+    g = torch.Generator().manual_seed(4)
+    obs, act = torch.randn(256, OBS, generator=g), torch.randn(256, ACT, generator=g)
+    q_full, q_half = full(obs, act), half(obs, act)
+    assert q_half.dtype == torch.float32
+    assert not torch.equal(q_full, q_half), "the hidden layers must have run in bfloat16"
+    scale = q_full.abs().max()
+    assert (q_half - q_full).abs().max() < 2e-2 * scale  # bfloat16's 8 bits, not an error of the maths
+    q_full.square().sum().backward()
+    q_half.square().sum().backward()
+    for a, b in zip(full.parameters(), half.parameters()):
+        assert b.grad.dtype == torch.float32
+        cosine = torch.nn.functional.cosine_similarity(a.grad.flatten(), b.grad.flatten(), dim=0)
+        assert cosine > 0.999, cosine
+    with pytest.raises(ValueError, match=r"matmul_dtype=torch.float16; accepted: torch.float32, torch.bfloat16"):
+        CriticEnsemble(OBS, ACT, (8,), matmul_dtype=torch.float16)

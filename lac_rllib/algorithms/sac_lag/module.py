@@ -27,6 +27,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
 from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
 from lac_rllib.constrained.networks import CriticEnsemble
+from lac_rllib.constrained.precision import TORCH_DTYPES, resolve_dtype
 
 # Keys of the forward outputs, declared once.
 Q_REWARD = "q_reward"  # (2, B) Q_R1, Q_R2 at (s, a)
@@ -57,12 +58,14 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         self.action_dist_cls = squashed_gaussian(self.action_low, self.action_high)
         if not self.inference_only:
             hidden, activation = tuple(cfg["critic_hidden"]), cfg["activation"]
+            # The critics' hidden matmuls in critic_dtype ("auto" resolved here, on the learner's CPU).
+            dtype = TORCH_DTYPES[resolve_dtype(cfg.get("critic_dtype", "float32"))]
             self.reward_critics = CriticEnsemble(obs_dim, act_dim, hidden=hidden, n_reward=2, n_cost=0,
-                                                 activation=activation)
+                                                 activation=activation, matmul_dtype=dtype)
             # CriticEnsemble counts its members as n_reward + n_cost; the split matters only to
             # LAC's chain, so the cost critic is a one-member ensemble.
             self.cost_critic = CriticEnsemble(obs_dim, act_dim, hidden=hidden, n_reward=1, n_cost=0,
-                                              activation=activation)
+                                              activation=activation, matmul_dtype=dtype)
 
     # ----- acting (env runners) -----
     def deterministic_action(self, obs: torch.Tensor) -> torch.Tensor:
@@ -74,7 +77,9 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         """ã = squash(u), u = μ(s) + σ(s)·ε by reparameterisation, and log π(ã|s) = log N(u; μ, σ²)
         − Σ log(1 − tanh²(u)) [O, and RLlib's TorchSquashedGaussian: the same density the env
         runners sample from, written out because torch.distributions costs more than the maths]."""
-        mean, log_std = self.actor(obs)
+        return self._sample(*self.actor(obs))
+
+    def _sample(self, mean: torch.Tensor, log_std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         u = mean + log_std.exp() * torch.randn_like(mean)
         return squash(u, self.action_low, self.action_high), squashed_log_prob(u, mean, log_std)
 
@@ -85,10 +90,12 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         (it runs only on the policy-delay steps)."""
         obs, action, next_obs = batch[Columns.OBS], batch[Columns.ACTIONS], batch[Columns.NEXT_OBS]
         with torch.no_grad():
-            next_action, logp_next = self.sample_action(next_obs)  # a' ~ π(·|s') [O]
+            next_mean, next_log_std = self.actor(next_obs)  # one actor forward for both targets
+            next_action, logp_next = self._sample(next_mean, next_log_std)  # a' ~ π(·|s') [O]
             q_reward_next = self.target_reward_critics(next_obs, next_action)
             # The cost target's next action is deterministic: squash(μ(s')) [O, ddpg.py].
-            q_cost_next = self.target_cost_critic(next_obs, self.deterministic_action(next_obs))[0]
+            next_det = squash(next_mean, self.action_low, self.action_high)
+            q_cost_next = self.target_cost_critic(next_obs, next_det)[0]
         return {
             Q_REWARD: self.reward_critics(obs, action),
             Q_COST: self.cost_critic(obs, action)[0],

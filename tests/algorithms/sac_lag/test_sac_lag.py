@@ -71,6 +71,34 @@ def test_cost_target_takes_the_deterministic_next_action_and_one_cost_critic():
     torch.testing.assert_close(module.deterministic_action(s2), a_det)
 
 
+def test_the_targets_run_the_actor_once_on_the_next_observations():
+    """a' ~ π(·|s') and the cost target's squash(μ(s')) come from one actor forward (one is the
+    other's mean): the critic step's targets cost one actor pass, not two."""
+    module, batch = _module(), _batch()
+    seen = []
+    hook = module.actor.register_forward_hook(lambda mod, args, out: seen.append(args[0]))
+    try:
+        module.forward_train(batch)
+    finally:
+        hook.remove()
+    assert len(seen) == 1 and torch.equal(seen[0], batch[Columns.NEXT_OBS])
+
+
+def test_critic_dtype_auto_resolves_where_the_module_is_built(monkeypatch):
+    from lac_rllib.constrained import precision
+
+    for flags, expected in (({"avx2", "avx512_bf16"}, torch.bfloat16), ({"avx2"}, torch.float32)):
+        monkeypatch.setattr(precision, "cpu_flags", lambda flags=flags: flags)
+        module = _module(critic_dtype="auto")
+        critics = (module.reward_critics, module.cost_critic, module.target_reward_critics, module.target_cost_critic)
+        assert {c.matmul_dtype for c in critics} == {expected}
+        assert SACLagConfig().training(critic_dtype="auto").resolved() == {"critic_dtype": str(expected)[6:]}
+    assert _module().reward_critics.matmul_dtype == torch.float32  # the default: OmniSafe's float32
+    assert _module(critic_dtype="bfloat16").cost_critic.matmul_dtype == torch.bfloat16
+    with pytest.raises(ValueError, match="critic_dtype.*float16.*accepted.*float32.*bfloat16.*auto"):
+        SACLagConfig().training(critic_dtype="float16")
+
+
 def test_reward_target_is_the_soft_min_over_the_twin_targets():
     module, batch = _module(), _batch()
     torch.manual_seed(2)
