@@ -89,3 +89,30 @@ def test_sac_lags_plain_torch_step_computes_the_learners_losses_and_gradients(ra
         _close(list(ours_pi), list(theirs_pi))
     finally:
         algo.stop()
+
+
+def _update_step_module():
+    spec = importlib.util.spec_from_file_location("update_step", ROOT / "benchmarks" / "update_step.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_against_refuses_a_revision_that_is_not_a_commit_before_anything_starts(capsys):
+    with pytest.raises(SystemExit) as e:
+        _update_step_module().main(["--against", "no-such-revision", "--algos", "ppo_lag"])
+    assert e.value.code == 2
+    assert "--against 'no-such-revision': not a commit of this repository" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_against_times_the_step_of_another_commits_code_beside_todays(capsys):
+    """--against HEAD: a child importing HEAD's lac_rllib from an unpacked tree (checked: not this
+    checkout's) and one importing today's, timed in turn; the same code, so their ratio is ~1."""
+    code = _update_step_module().main(["--against", "HEAD", "--algos", "ppo_lag", "--task", TASK, "--steps", "30",
+                                       "--repeats", "3"])
+    assert code == 0
+    row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ppo_lag |")][-1]
+    old, new, ratio = (float(cell.strip().rstrip("x")) for cell in row.split("|")[2:5])
+    assert old > 0 and new > 0 and abs(ratio - old / new) < 0.01 + 1e-9
+    assert 0.5 < ratio < 2.0, row  # the same code on both sides
