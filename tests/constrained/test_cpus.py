@@ -30,3 +30,17 @@ def test_every_algorithm_runs_the_hook_on_its_env_runners(algo):
     config = build_config(algo, "lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 2}, timesteps=100_000, cpus=2)
     assert OneThreadPerEnvRunner in config.callbacks_class
     assert config.num_env_runners == 2
+
+
+@pytest.mark.parametrize("algo", ["lac", "ppo_lag", "sac_lag", "focops"])
+def test_every_learner_leaves_fresh_tensors_unfilled_under_rllibs_determinism(ray_session, threads, algo):
+    """RLlib's seeding turns torch's deterministic algorithms on, whose default NaN-fills every
+    tensor torch.empty makes; each learner turns the fill off (learner_torch), determinism stays."""
+    torch.utils.deterministic.fill_uninitialized_memory = True
+    algo = build_config(algo, "lac/PointHazard-v0", 0, {}, timesteps=100_000).build_algo()
+    try:
+        assert torch.are_deterministic_algorithms_enabled()  # RLlib's, for the seed
+        assert torch.utils.deterministic.fill_uninitialized_memory is False
+        assert torch.get_num_threads() == algo.config.torch_threads
+    finally:
+        algo.stop()

@@ -24,6 +24,7 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norm_, polyak_, zero_non_finite_
 from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (
@@ -79,7 +80,7 @@ def critic_targets(batch, q_next: torch.Tensor, n_reward: int, config) -> tuple[
 class LACTorchLearner(TorchLearner):
     @override(TorchLearner)
     def build(self) -> None:
-        torch.set_num_threads(self.config.torch_threads)
+        learner_torch(self.config.torch_threads)  # threads; no NaN fill of fresh tensors (constrained/cpus.py)
         super().build()  # the learner connector comes from LACConfig.build_learner_connector
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None

@@ -54,6 +54,7 @@ from ray.rllib.utils.annotations import override
 from ray.rllib.utils.torch_utils import explained_variance
 
 from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
+from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norms_, zero_non_finite_
 from lac_rllib.constrained.lagrange import (
     AdamStep,
@@ -120,7 +121,7 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
 
     @override(PPOTorchLearner)
     def build(self) -> None:
-        torch.set_num_threads(self.config.torch_threads)
+        learner_torch(self.config.torch_threads)  # threads; no NaN fill of fresh tensors (constrained/cpus.py)
         super().build()  # PPOLearner.build appends RLlib's GAE to the learner connector
         self.cost_gae = CostGAE(gamma=self.config.cost_gamma, lambda_=self.config.lambda_,
                                 standardize=self.config.standardize_cost_advantages)

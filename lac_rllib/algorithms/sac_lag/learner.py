@@ -36,6 +36,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.constrained.costs import COSTS
+from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norm_, clip_global_norms_, polyak_, zero_non_finite_
 from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (
@@ -87,7 +88,7 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
 
     @override(TorchLearner)
     def build(self) -> None:
-        torch.set_num_threads(self.config.torch_threads)
+        learner_torch(self.config.torch_threads)  # threads; no NaN fill of fresh tensors (constrained/cpus.py)
         super().build()  # the learner connector comes from SACLagConfig.build_learner_connector
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None)
