@@ -65,11 +65,15 @@ def step_adams(optimizers) -> None:
                 hyper.append(group)
     if not params:
         return
-    torch._foreach_add_(steps, 1)
+    # Scalars go in as 0-d float32 tensors, one per distinct value: on CPU a foreach op loops over
+    # its tensors, and a Python number is wrapped into a tensor again for each of them. The
+    # kernels cast a number to the tensors' float32 first, so the arithmetic is the same.
+    scalar = _Scalars(params[0].dtype)
+    torch._foreach_add_(steps, [scalar(1.0)] * len(steps))
     # Moments, per parameter with its group's betas (one call per distinct pair, usually one).
     for (beta1, beta2), idx in _by(hyper, lambda g: tuple(g["betas"])).items():
         torch._foreach_lerp_([exp_avgs[i] for i in idx], [grads[i] for i in idx], 1 - beta1)
-        torch._foreach_mul_([exp_avg_sqs[i] for i in idx], beta2)
+        torch._foreach_mul_([exp_avg_sqs[i] for i in idx], scalar(beta2))
         torch._foreach_addcmul_([exp_avg_sqs[i] for i in idx], [grads[i] for i in idx],
                                 [grads[i] for i in idx], value=1 - beta2)
     step_counts = torch.stack(steps).tolist()  # one read-back for every parameter's count
@@ -80,12 +84,24 @@ def step_adams(optimizers) -> None:
             size = group["lr"] / (1 - beta1**step)  # a float32 tensor op when lr is a tensor, as Adam's loop
             known[id(group), step] = -(size.item() if isinstance(size, torch.Tensor) else size)
         step_size.append(known[id(group), step])
-        bias2_sqrt.append((1 - beta2**step) ** 0.5)
-        eps.append(group["eps"])
+        bias2_sqrt.append(scalar((1 - beta2**step) ** 0.5))
+        eps.append(scalar(group["eps"]))
     denom = torch._foreach_sqrt(exp_avg_sqs)
     torch._foreach_div_(denom, bias2_sqrt)
     torch._foreach_add_(denom, eps)
     torch._foreach_addcdiv_(params, exp_avgs, denom, step_size)
+
+
+class _Scalars:
+    """0-d tensors of ``dtype``, one per distinct value asked for (a step's few constants)."""
+
+    def __init__(self, dtype: torch.dtype):
+        self.dtype, self.made = dtype, {}
+
+    def __call__(self, value: float) -> torch.Tensor:
+        if value not in self.made:
+            self.made[value] = torch.tensor(value, dtype=self.dtype)
+        return self.made[value]
 
 
 def _by(items, key) -> dict:
