@@ -38,6 +38,10 @@ from lac_rllib.constrained.precision import DTYPE_CHOICES, resolve_dtype
 from lac_rllib.constrained.task_config import SafeTaskParams
 
 LAGRANGIAN_RULES = ("adam", "gradient")
+#: critic_dtype="auto" runs bfloat16 only on critics at least this wide: below, the casts cost
+#: more than the matmuls save (a PointGoal1 step at 64 wide: 3.55 ms float32, 4.19 bfloat16; at
+#: 128: 8.64 / 7.22; at 256: 15.43 / 9.86; docs/speed.md).
+BF16_MIN_WIDTH = 128
 MINIBATCH_DRAWS = ("with_replacement", "shuffled_passes")
 
 
@@ -75,12 +79,14 @@ class SACLagParams(SafeTaskParams):
     critic_dtype: str = param("float32", accepts=one_of(DTYPE_CHOICES))
     """Input dtype of the critics' hidden-layer matmuls, in the update and its targets [D]:
     "float32", "bfloat16" (the output layer, the parameters, their gradients and Adam stay
-    float32), or "auto" = bfloat16 on a CPU with native bf16 matmuls (AVX512-BF16, AMX), float32
-    elsewhere, decided where the module is built and recorded as what it resolved to (config.json's
-    ``resolved``, the checkpoint's metadata, the MLflow tag ``lac.resolved.critic_dtype``; a resume
-    where it resolves otherwise is refused). The critics are most of a step's matmuls at (256,
-    256), so bfloat16 is what makes the PointGoal1 step ~1.5x faster on such a CPU (docs/speed.md);
-    float32 is OmniSafe's arithmetic and the default."""
+    float32), or "auto" = bfloat16 on a CPU with native bf16 matmuls (AVX512-BF16, AMX) and
+    critics at least ``BF16_MIN_WIDTH`` wide, float32 otherwise, decided where the module is built
+    and recorded as what it resolved to (config.json's ``resolved``, the checkpoint's metadata, the
+    MLflow tag ``lac.resolved.critic_dtype``; a resume where it resolves otherwise is refused). The
+    critics are most of a step's matmuls at (256, 256), so bfloat16 makes the PointGoal1 step
+    ~1.5x faster on such a CPU (docs/speed.md). float32 is OmniSafe's arithmetic and the default;
+    "auto" in the ``safety_gym`` preset, where its PointGoal1 curves matched float32's at equal
+    seeds (docs/fidelity/pointgoal1-sac-lag/)."""
     max_grad_norm: float | None = param(40.0, accepts=or_none(POSITIVE))
     """Global gradient-norm clip of each network: the reward critics, the cost critic, the actor
     [O]; None = off."""
@@ -134,6 +140,15 @@ class SACLagParams(SafeTaskParams):
     minibatch (1.0-1.1x slower: SAC-Lag's step is its matmuls: docs/speed.md). Speed only."""
 
 
+def critic_matmul_dtype(critic_dtype: str, critic_hidden) -> str:
+    """What ``critic_dtype`` runs as on this CPU: "auto" is bfloat16 where the CPU multiplies it
+    natively (lac_rllib.constrained.precision.resolve_dtype) and the narrowest hidden layer is at
+    least ``BF16_MIN_WIDTH`` wide, float32 otherwise; an explicit dtype is kept."""
+    if critic_dtype == "auto" and min(critic_hidden, default=0) < BF16_MIN_WIDTH:
+        return "float32"
+    return resolve_dtype(critic_dtype)
+
+
 # [O] SACLag.yaml: its defaults (the MuJoCo column); its Goal1/Circle1 overrides for the
 # navigation tasks; obs_normalize False everywhere. "tiny" [D] learns lac/PointHazard-v0 within
 # the limit in ~20k env steps (tests/algorithms/sac_lag/test_sac_lag_learning.py): small nets,
@@ -143,7 +158,7 @@ class SACLagParams(SafeTaskParams):
 PRESETS: dict[str, dict[str, Any]] = {
     "mujoco": {"obs_normalization": False},
     "safety_gym": {"obs_normalization": False, "alpha": 1e-5, "actor_lr": 5e-6, "critic_lr": 1e-3,
-                   "nu_init": 0.0, "lagrangian_lr": 5e-7},
+                   "nu_init": 0.0, "lagrangian_lr": 5e-7, "critic_dtype": "auto"},
     "tiny": {
         "obs_normalization": False,
         "env_steps_per_iteration": 1000,
@@ -194,9 +209,8 @@ class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
                              f"{self.log_std_max!r} are invalid together; accepted: log_std_min < log_std_max")
 
     def resolved(self) -> dict[str, Any]:
-        """``critic_dtype`` as the critics run it here: "auto" is bfloat16 on a CPU with native
-        bf16 matmuls, else float32 (lac_rllib.constrained.precision.resolve_dtype)."""
-        return {"critic_dtype": resolve_dtype(self.critic_dtype)}
+        """``critic_dtype`` as the critics run it here (:func:`critic_matmul_dtype`)."""
+        return {"critic_dtype": critic_matmul_dtype(self.critic_dtype, self.critic_hidden)}
 
     @property
     def updates_per_iteration(self) -> int:

@@ -24,10 +24,11 @@ from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
+from lac_rllib.algorithms.sac_lag.config import critic_matmul_dtype
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
 from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
 from lac_rllib.constrained.networks import CriticEnsemble
-from lac_rllib.constrained.precision import TORCH_DTYPES, resolve_dtype
+from lac_rllib.constrained.precision import TORCH_DTYPES
 
 # Keys of the forward outputs, declared once.
 Q_REWARD = "q_reward"  # (2, B) Q_R1, Q_R2 at (s, a)
@@ -59,7 +60,7 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         if not self.inference_only:
             hidden, activation = tuple(cfg["critic_hidden"]), cfg["activation"]
             # The critics' hidden matmuls in critic_dtype ("auto" resolved here, on the learner's CPU).
-            dtype = TORCH_DTYPES[resolve_dtype(cfg.get("critic_dtype", "float32"))]
+            dtype = TORCH_DTYPES[critic_matmul_dtype(cfg.get("critic_dtype", "float32"), hidden)]
             self.reward_critics = CriticEnsemble(obs_dim, act_dim, hidden=hidden, n_reward=2, n_cost=0,
                                                  activation=activation, matmul_dtype=dtype)
             # CriticEnsemble counts its members as n_reward + n_cost; the split matters only to

@@ -14,7 +14,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from lac_rllib.algorithms import registry
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.algorithms.sac_lag.algorithm import SACLag
-from lac_rllib.algorithms.sac_lag.config import FIELDS, PRESETS, SACLagConfig, build_config
+from lac_rllib.algorithms.sac_lag.config import BF16_MIN_WIDTH, FIELDS, PRESETS, SACLagConfig, build_config
 from lac_rllib.algorithms.sac_lag.learner import ACTOR, actor_loss, critic_targets
 from lac_rllib.algorithms.sac_lag.module import SACLagTorchRLModule
 from lac_rllib.constrained.costs import COSTS
@@ -87,12 +87,19 @@ def test_the_targets_run_the_actor_once_on_the_next_observations():
 def test_critic_dtype_auto_resolves_where_the_module_is_built(monkeypatch):
     from lac_rllib.constrained import precision
 
+    wide = (BF16_MIN_WIDTH, BF16_MIN_WIDTH)
     for flags, expected in (({"avx2", "avx512_bf16"}, torch.bfloat16), ({"avx2"}, torch.float32)):
         monkeypatch.setattr(precision, "cpu_flags", lambda flags=flags: flags)
-        module = _module(critic_dtype="auto")
+        module = _module(critic_dtype="auto", critic_hidden=wide)
         critics = (module.reward_critics, module.cost_critic, module.target_reward_critics, module.target_cost_critic)
         assert {c.matmul_dtype for c in critics} == {expected}
         assert SACLagConfig().training(critic_dtype="auto").resolved() == {"critic_dtype": str(expected)[6:]}
+    # Narrower critics stay float32 under auto even where bf16 is native (the casts would cost more).
+    monkeypatch.setattr(precision, "cpu_flags", lambda: {"avx2", "avx512_bf16"})
+    narrow = (BF16_MIN_WIDTH, BF16_MIN_WIDTH // 2)
+    assert _module(critic_dtype="auto", critic_hidden=narrow).reward_critics.matmul_dtype == torch.float32
+    config = SACLagConfig().training(critic_dtype="auto", critic_hidden=narrow)
+    assert config.resolved() == {"critic_dtype": "float32"}
     assert _module().reward_critics.matmul_dtype == torch.float32  # the default: OmniSafe's float32
     assert _module(critic_dtype="bfloat16").cost_critic.matmul_dtype == torch.bfloat16
     with pytest.raises(ValueError, match="critic_dtype.*float16.*accepted.*float32.*bfloat16.*auto"):
