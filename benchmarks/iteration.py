@@ -43,6 +43,13 @@ the calls times the cost of an update call of one minibatch, measured in the sam
 ``--algos ppo_lag,sac_lag --update-paths`` times the baselines' whole training iterations on
 RLlib's update path and on the fused one (``update_path``: the same updates bit for bit), same
 run, one CPU, interleaved iteration by iteration after a warm-up, and prints the ratio.
+
+``--algos ppo_lag --against REV`` times instead each algorithm's whole training iterations in the
+code at git revision ``REV`` (say, the commit an issue was filed against) beside today's default,
+same run (:mod:`revision`): two child processes, one importing REV's ``lac_rllib`` and one today's,
+each build the algorithm at the task's preset from the same seed (one CPU, one torch thread), train
+through a warm-up of ``--steps`` env steps, then train one iteration whenever the parent asks, the
+two in turn, until each has timed ``--steps``; prints seconds per ``--steps`` env steps and REV / today.
 """
 
 from __future__ import annotations
@@ -55,6 +62,8 @@ import sys
 import time
 import uuid
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PHASES = ("env", "sampling machinery", "chain", "update", "other", "total")
 BASELINE = {"num_envs_per_env_runner": 1, "langevin_fused": False, "langevin_dtype": "float32"}
@@ -340,9 +349,62 @@ def _write(path: str | None, lines: list[str]) -> None:
         Path(path).write_text("\n".join(lines))
 
 
+def _serve(algo: str, task: str, seed: int, steps: int) -> int:
+    """The child of ``--against``: builds ``algo`` with the ``lac_rllib`` on its path, trains
+    through ``steps`` env steps of warm-up, announces it, then trains one iteration per request and
+    answers its seconds and env steps (:mod:`revision`)."""
+    import json
+
+    import ray
+    import revision
+    import torch
+
+    from lac_rllib.algorithms.registry import build_config
+
+    torch.set_num_threads(1)
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    algo_obj = build_config(algo, task, seed, {}, timesteps=10**9).build_algo()
+
+    def lifetime():
+        return algo_obj.metrics.peek(("env_runners", "num_env_steps_sampled_lifetime"), default=0)
+
+    while lifetime() < steps:
+        algo_obj.train()
+    revision.announce()
+    for _ in revision.requests():
+        start, t0 = lifetime(), time.perf_counter()
+        algo_obj.train()
+        print(json.dumps({"s": time.perf_counter() - t0, "steps": lifetime() - start}), flush=True)
+    algo_obj.stop()
+    return 0
+
+
+def time_against(rev: str, algos: list[str], task: str, seed: int, steps: int) -> list[str]:
+    """Seconds per ``steps`` env steps of each of ``algos`` at REV and today, iterations in turn."""
+    import revision
+
+    with revision.unpacked(rev) as (short, tree):
+        lines = [f"| algorithm | s per {steps:,} env steps, {short} | today | {short} / today | iterations timed |",
+                 "|---|---:|---:|---:|---:|"]
+        for a in algos:
+            args = ["--serve", a, "--tasks", task, "--seed", str(seed), "--steps", str(steps)]
+            with revision.pair(short, tree, __file__, args) as children:
+                seconds, done, n = dict.fromkeys(children, 0.0), dict.fromkeys(children, 0), 0
+                while min(done.values()) < steps:
+                    for k, reply in revision.ask(children).items():
+                        seconds[k] += reply["s"]
+                        done[k] += reply["steps"]
+                    n += 1
+            old, new = (seconds[k] * steps / done[k] for k in (short, "today"))
+            lines.append(f"| {a} | {old:.2f} | {new:.2f} | {old / new:.2f}x | {n} each |")
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--tasks", nargs="+", default=list(DEFAULT_TASKS))
+    parser.add_argument("--tasks", nargs="+", default=None,
+                        help=f"default: {' '.join(DEFAULT_TASKS)} (with --against: the first)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--variant", action="append", default=[], metavar="NAME:F=V,...",
                         help="another configuration to time (lac-train --set syntax)")
@@ -354,7 +416,13 @@ def main(argv=None) -> int:
                         help="with --algos: the baselines' iterations on update_path rllib against fused")
     parser.add_argument("--cpus", type=int, default=None, metavar="N",
                         help="instead of the phases: whole iterations on 1 CPU against N CPUs, and their ratio")
+    parser.add_argument("--against", metavar="REV", help="with --algos: whole iterations of the code at git "
+                        "revision REV beside today's (module docstring)")
+    parser.add_argument("--serve", help=argparse.SUPPRESS)  # the --against children
     args = parser.parse_args(argv)
+    args.tasks = args.tasks or list(DEFAULT_TASKS[:1] if args.against or args.serve else DEFAULT_TASKS)
+    if args.serve:
+        return _serve(args.serve, args.tasks[0], args.seed, args.steps)
     from lac_rllib.algorithms.lac.config import parse_sets
     from lac_rllib.tasks import get_task
 
@@ -374,9 +442,27 @@ def main(argv=None) -> int:
                 if "update_path" not in algo_config(a).FIELDS.names:
                     raise ValueError(f"--update-paths with --algos {a!r}: it has no update_path; accepted: "
                                      "the baselines that have (ppo_lag, sac_lag)")
+        if args.against:
+            from lac_rllib.algorithms.registry import ALGOS
+
+            if not args.algos or any(a not in ALGOS for a in args.algos.split(",")):
+                raise ValueError(f"--against needs --algos, each one of: {', '.join(ALGOS)} (got {args.algos!r})")
+            if len(args.tasks) != 1:
+                raise ValueError(f"--against times one task; got --tasks {' '.join(args.tasks)}")
+            import revision
+
+            with revision.unpacked(args.against):  # a revision that is not a commit: refused here
+                pass
     except ValueError as e:
         parser.exit(2, f"iteration: error: {e}\n")
 
+    if args.against:
+        lines = time_against(args.against, args.algos.split(","), args.tasks[0], args.seed, args.steps)
+        out = [f"Whole training iterations, one CPU, one torch thread, the two in turn after a warm-up of "
+               f"{args.steps:,} env steps; {args.tasks[0]}, seed {args.seed}.", "", *lines]
+        print("\n".join(out))
+        _write(args.out, out)
+        return 0
     import ray
     import torch
 

@@ -27,8 +27,8 @@ one torch thread, one CPU. PPO-Lag's and SAC-Lag's two paths make the same updat
 (tests/algorithms/test_update_path.py).
 
 ``--against REV`` times instead the default step of the code at git revision ``REV`` (a commit, a
-tag: say, the one an issue was filed against) beside today's, same run: ``git archive`` unpacks
-REV outside the work tree, and two child processes, one importing REV's ``lac_rllib`` and one
+tag: say, the one an issue was filed against) beside today's, same run (:mod:`revision`): ``git
+archive`` unpacks REV outside the work tree, and two child processes, one importing REV's ``lac_rllib`` and one
 today's, each build the algorithm with today's ``benchmark_fields`` (fields REV does not know are
 refused there, in one line), warm up, and time one update call whenever the parent asks, the two
 in turn, so that both see the same machine load. Prints the medians and REV / today.
@@ -38,11 +38,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -101,11 +98,11 @@ def _timed_reference(step, batches) -> float:
 
 def _serve(algo_name: str, task: str, sets: dict, warmup: int) -> int:
     """The child of ``--against``: builds ``algo_name`` with the ``lac_rllib`` on its path, warms it
-    up, prints where that package lives, then one ms-per-step figure per line read from stdin."""
+    up, announces it, then one ms-per-step figure per request (:mod:`revision`)."""
     import ray
+    import revision
     import torch
 
-    import lac_rllib
     from lac_rllib.algorithms.registry import build_config
 
     torch.set_num_threads(1)
@@ -113,72 +110,32 @@ def _serve(algo_name: str, task: str, sets: dict, warmup: int) -> int:
     algo = build_config(algo_name, task, 0, sets, timesteps=10**7).build_algo()
     for _ in range(warmup):
         algo.train()
-    print(json.dumps({"package": str(Path(lac_rllib.__file__).resolve().parent)}), flush=True)
-    for _ in sys.stdin:
+    revision.announce()
+    for _ in revision.requests():
         print(json.dumps({"ms": 1e3 * _timed_update(algo)}), flush=True)
     algo.stop()
     return 0
 
 
-def _unpack(rev: str, into: Path) -> str:
-    """REV's tree under ``into`` (git archive: no worktree bookkeeping); returns its short hash."""
-    root = Path(__file__).resolve().parents[1]
-    commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--verify", "--short", f"{rev}^{{commit}}"],
-                            capture_output=True, text=True)
-    if commit.returncode != 0:
-        raise ValueError(f"--against {rev!r}: not a commit of this repository ({commit.stderr.strip()})")
-    archive = subprocess.run(["git", "-C", str(root), "archive", commit.stdout.strip()], capture_output=True,
-                             check=True)
-    subprocess.run(["tar", "-x", "-C", str(into)], input=archive.stdout, check=True)
-    return commit.stdout.strip()
-
-
-def _child(tree: Path | None, algo: str, task: str, sets: dict, warmup: int) -> subprocess.Popen:
-    """A ``_serve`` child importing ``lac_rllib`` from ``tree`` (None: today's, this checkout's)."""
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    if tree is not None:  # ahead of the editable install, whose finder comes after sys.path
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree), env.get("PYTHONPATH")]))
-    return subprocess.Popen([sys.executable, __file__, "--serve", algo, "--task", task, "--sets", json.dumps(sets),
-                             "--warmup", str(warmup)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                            env=env, cwd=tree or Path(__file__).resolve().parents[1])
-
-
-def _reply(child: subprocess.Popen, what: str) -> dict:
-    line = child.stdout.readline()
-    if not line:
-        raise RuntimeError(f"the {what} child exited ({child.wait()}) before answering: see its stderr above")
-    return json.loads(line)
-
-
 def against(rev: str, algos: list[str], task: str, steps: int, repeats: int) -> list[str]:
     """Today's default step of each of ``algos`` against REV's, timed in turn (module docstring)."""
     import reference_steps
+    import revision
 
     from lac_rllib.algorithms.registry import benchmark_fields
 
     lines = []
-    with tempfile.TemporaryDirectory(prefix="update-step-") as tmp:
-        short = _unpack(rev, Path(tmp))
+    with revision.unpacked(rev) as (short, tree):
         lines += [f"| algorithm | {short} | today | {short} / today |", "|---|---:|---:|---:|"]
         for name in algos:
             sets = benchmark_fields(name, "update_step", steps)
             warmup = reference_steps.STEPS[name].warmup_iterations(steps) if name in reference_steps.STEPS else 1
-            children = {short: _child(Path(tmp), name, task, sets, warmup),
-                        "today": _child(None, name, task, sets, warmup)}
-            try:
-                where = {k: _reply(c, k)["package"] for k, c in children.items()}
-                if not where[short].startswith(tmp) or where["today"].startswith(tmp):
-                    raise RuntimeError(f"the children imported the wrong lac_rllib: {where}")
+            args = ["--serve", name, "--task", task, "--sets", json.dumps(sets), "--warmup", str(warmup)]
+            with revision.pair(short, tree, __file__, args) as children:
                 times = {k: [] for k in children}
                 for _ in range(repeats):
-                    for k, c in children.items():
-                        c.stdin.write("time\n")
-                        c.stdin.flush()
-                        times[k].append(_reply(c, k)["ms"])
-            finally:
-                for c in children.values():
-                    c.stdin.close()
-                    c.wait()
+                    for k, reply in revision.ask(children).items():
+                        times[k].append(reply["ms"])
             old, new = (statistics.median(times[k]) for k in (short, "today"))
             lines.append(f"| {name} | {old:.2f} | {new:.2f} | {old / new:.2f}x |")
             print(lines[-1], flush=True)
