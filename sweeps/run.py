@@ -521,11 +521,6 @@ def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
     return STARTUP_S + (steps * seconds_per_env_step(task, envs) + extra) / cpus ** 0.5
 
 
-#: Steps per episode the plan assumes for the evaluation block (the task presets' episode limits:
-#: PointHazard's 100, Safety-Gymnasium's and the velocity tasks' 1,000; episodes may end sooner).
-EPISODE_STEPS = {"tiny": 100, "safety_gym": 1000, "mujoco": 1000}
-
-
 def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> float:
     """Rough seconds of a trial's evaluation blocks (sweeps/trainable.py): ``eval_episodes``
     episodes per mode its algorithm has, at the end and every ``eval_every`` iterations, at the
@@ -540,8 +535,8 @@ def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> fl
     modes = [m for m in sweep.eval_modes or ("generator", "stochastic") if m == "stochastic" or m in actions(algo)]
     per_iteration = params.get("env_steps_per_iteration") or params.get("train_batch_size_per_learner") or 0
     blocks = 1 + (int(steps // per_iteration) // sweep.eval_every if sweep.eval_every and per_iteration else 0)
-    episode_steps = EPISODE_STEPS.get(get_task(task).preset, 1000)
-    return blocks * len(modes) * episodes * episode_steps * eval_seconds_per_env_step(task)
+    # Each episode counted at the task's episode limit (TaskSpec.episode_steps; episodes may end sooner).
+    return blocks * len(modes) * episodes * get_task(task).episode_steps * eval_seconds_per_env_step(task)
 
 
 def eval_share_of(evals: list[float], per_trial: list[float], trials, calibration) -> float:

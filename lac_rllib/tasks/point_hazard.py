@@ -104,10 +104,10 @@ def make_cost_probe(env_config: dict) -> gym.Env:
 POINT_HAZARD = register(TaskSpec(
     id="lac/PointHazard-v0", factory=f"{__name__}:make_point_hazard", cost_limit=2.0,
     episode_cost_discount=1.0, preset=TINY, obs_dim=7, act_dim=2,
-    cost_source='info["cost"] = 1 inside the hazard disc',
+    cost_source='info["cost"] = 1 inside the hazard disc', episode_steps=100,
 ))
 COST_PROBE = register(TaskSpec(
     id="lac/CostProbe-v0", factory=f"{__name__}:make_cost_probe", cost_limit=1e9,
     episode_cost_discount=1.0, preset=TINY, obs_dim=1, act_dim=1,
-    cost_source='info["cost"] = 2t + 1 (diagnostic)',
+    cost_source='info["cost"] = 2t + 1 (diagnostic)', episode_steps=7,
 ))

@@ -54,6 +54,11 @@ class TaskSpec:
     #: Button1 step costs ~3 Goal1 steps, docs/sweeps.md). 1.0 where not measured. A measurement,
     #: not part of what the task is: left out of a spec's equality.
     step_cost: float = dataclasses.field(default=1.0, compare=False)
+    #: The env's episode limit, steps before it truncates (an episode may end sooner): the sweep
+    #: plan counts each evaluation episode at it. 1,000 (Safety-Gymnasium's and the velocity
+    #: tasks') where a task does not say; Circle and Run are 500. A planning figure, left out of a
+    #: spec's equality as ``step_cost`` is.
+    episode_steps: int = dataclasses.field(default=1000, compare=False)
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""

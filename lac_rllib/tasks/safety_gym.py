@@ -244,6 +244,7 @@ def _nav(robot: str, task: str) -> TaskSpec:
         kwargs={"env_id": env_id},
         family=_family(task),
         step_cost=NAV_STEP_COST[task][list(NAV_ROBOTS).index(robot)],
+        episode_steps=episode_steps(env_id),
     )
 
 

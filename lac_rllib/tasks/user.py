@@ -160,11 +160,12 @@ def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = 
             except Exception:  # noqa: S110 (the check's error is the one to report)
                 pass
         raise
+    limit = getattr(getattr(inner, "spec", None), "max_episode_steps", None)  # gymnasium's registered TimeLimit
     _call(f"task {source}", "close()", inner.close)
     return register(TaskSpec(
         id=task_id, factory=FACTORY, cost_limit=float(cost_limit), episode_cost_discount=float(episode_cost_discount),
         preset=preset, obs_dim=obs_dim, act_dim=act_dim, cost_source=f"info[{cost_key!r}] of {source}",
-        kwargs=env_kwargs,
+        kwargs=env_kwargs, **({"episode_steps": int(limit)} if limit else {}),
     ))
 
 

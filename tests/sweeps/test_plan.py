@@ -59,7 +59,7 @@ def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypat
     step_s = cli.seconds_per_env_step("SafetyPointButton1-v0", 10)  # the preset's 10 envs per runner
 
     def formula(t):  # one trial, 1 CPU: the estimate is this trial's, its evaluation block included
-        evaluation = 2 * 10 * cli.EPISODE_STEPS["safety_gym"] * cli.eval_seconds_per_env_step("SafetyPointButton1-v0")
+        evaluation = 2 * 10 * 1000 * cli.eval_seconds_per_env_step("SafetyPointButton1-v0")
         return cli.STARTUP_S + steps * step_s + chain * t + evaluation
 
     args = ("--space", "paper", "--task", "SafetyPointButton1-v0", "--budget", "paper", "--seeds", "1")
@@ -246,3 +246,19 @@ def test_the_estimate_counts_the_evaluation_blocks(tmp_path, monkeypatch, capsys
     assert every.estimated_wall_s - none.estimated_wall_s == pytest.approx(3 * block)
     cli.print_plan(end)
     assert f"~{end.eval_share:.0%} of the estimated time" in capsys.readouterr().out
+
+
+def test_an_evaluation_episode_is_counted_at_its_tasks_episode_limit(tmp_path, monkeypatch):
+    """Circle's episodes are 500 steps (safety_gymnasium's limit), Goal's 1,000: the plan counts
+    each evaluation episode at its own task's limit, not at its preset's."""
+    f = tmp_path / "e.yaml"
+
+    def eval_s(task: str) -> float:
+        walls = []
+        for extra in ("eval_episodes: 0\n", ""):
+            f.write_text(f"task: {task}\nbudget: 40000\nseeds: 1\nalgo: ppo_lag\n" + extra)
+            walls.append(_plan(tmp_path, monkeypatch, "--config", str(f)).estimated_wall_s)
+        return (walls[1] - walls[0]) / (2 * 10 * cli.eval_seconds_per_env_step(task))  # steps per episode
+
+    assert eval_s("SafetyPointCircle1-v0") == pytest.approx(500)
+    assert eval_s("SafetyPointGoal1-v0") == pytest.approx(1000)

@@ -67,7 +67,7 @@ def _check_spaces_and_time_limit(env, spec):
     assert env.observation_space.dtype == np.float32
     assert env.action_space.shape == (spec.act_dim,) and env.action_space.dtype == np.float32
     limits = [w._max_episode_steps for w in _wrappers(env) if hasattr(w, "_max_episode_steps")]
-    assert limits == [safety_gym.episode_steps(spec.id)]
+    assert limits == [safety_gym.episode_steps(spec.id)] == [spec.episode_steps]  # what the sweep plan counts
 
 
 @pytest.mark.parametrize("task_id", list(VEL))

@@ -1,0 +1,27 @@
+"""A user's own env as a task: what its TaskSpec records of it."""
+
+from pathlib import Path
+
+import gymnasium as gym
+
+from lac_rllib.tasks.user import user_task
+
+USER_ENVS = str(Path(__file__).resolve().parents[1] / "sweeps")  # tests/sweeps/user_envs.py
+
+
+def test_a_user_tasks_episode_limit_is_its_gymnasium_time_limit_where_it_has_one():
+    """The sweep plan counts evaluation episodes at ``episode_steps``: a gymnasium id registered
+    with a time limit gives it; a bare factory's env (which may truncate itself) gives the default."""
+    gym.register("lactest/Line-v0", entry_point="user_envs:_Line", max_episode_steps=40)
+    import sys
+
+    sys.path.insert(0, USER_ENVS)
+    try:
+        registered = user_task("user/lactest-line-40", gym_id="lactest/Line-v0", cost_limit=5, cost_key="violation",
+                               preset="tiny")
+        bare = user_task("user/lactest-line-bare", factory="user_envs:make_safe", cost_limit=5,
+                         cost_key="violation", preset="tiny", search_dirs=(USER_ENVS,))
+    finally:
+        sys.path.remove(USER_ENVS)
+    assert registered.episode_steps == 40
+    assert bare.episode_steps == 1000
