@@ -1,5 +1,6 @@
 """A user's own env as a task: what its TaskSpec records of it."""
 
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -13,8 +14,6 @@ def test_a_user_tasks_episode_limit_is_its_gymnasium_time_limit_where_it_has_one
     """The sweep plan counts evaluation episodes at ``episode_steps``: a gymnasium id registered
     with a time limit gives it; a bare factory's env (which may truncate itself) gives the default."""
     gym.register("lactest/Line-v0", entry_point="user_envs:_Line", max_episode_steps=40)
-    import sys
-
     sys.path.insert(0, USER_ENVS)
     try:
         registered = user_task("user/lactest-line-40", gym_id="lactest/Line-v0", cost_limit=5, cost_key="violation",
