@@ -1,8 +1,8 @@
 """The shared trust-region step (lac_rllib/constrained/trust_region.py): CG on an SPD system, the
 Fisher-vector product against an explicit Hessian of the mean KL (and blind to phantom rows), the
 line search's accept/reject and bit-for-bit restore, CPO's dual against a brute-force 2-D quadratic
-programme in each case, and PCPO's projections against the analytic ones. Pure torch (scipy's
-SLSQP as the brute force), float64, seconds in total."""
+programme in each case (an exact enumeration of the feasible set's boundary), and PCPO's
+projections against the analytic ones and scipy's SLSQP. Pure torch, float64, seconds in total."""
 
 import functools
 import math
@@ -249,17 +249,31 @@ def _slsqp(objective, constraints):
     return res.x
 
 
+def _boundary(n=2_000_001):
+    """Points of the trust region's boundary ½xᵀHx = δ, a dense grid in angle."""
+    angle = np.linspace(0, 2 * np.pi, n)
+    return math.sqrt(2 * RADIUS) * np.linalg.solve(np.linalg.cholesky(H).T, [np.cos(angle), np.sin(angle)])
+
+
 def _brute_force(b, c):
     """max gᵀx s.t. ½xᵀHx ≤ δ, bᵀx + c ≤ 0 [CPO §6.1]; with no feasible point, min bᵀx on the
-    trust region (what recovery aims at)."""
-    def trust(x):
-        return RADIUS - 0.5 * x @ H @ x
-
-    if c ** 2 / (b @ np.linalg.solve(H, b)) > 2 * RADIUS and c >= 0:  # a dense grid on the boundary
-        angle = np.linspace(0, 2 * np.pi, 2_000_001)
-        boundary = math.sqrt(2 * RADIUS) * np.linalg.solve(np.linalg.cholesky(H).T, [np.cos(angle), np.sin(angle)])
+    trust region (what recovery aims at). A linear objective on an ellipse cut by a half-plane is
+    maximised on the boundary of the feasible set: on the ellipse's feasible arc (a dense grid) or
+    at an end of the chord, where the line bᵀx + c = 0 meets the ellipse (solved exactly). No
+    optimiser: SLSQP started from an infeasible θ_old fails on some scipy releases."""
+    boundary = _boundary()
+    if c ** 2 / (b @ np.linalg.solve(H, b)) > 2 * RADIUS and c >= 0:  # no feasible point
         return boundary[:, np.argmin(b @ boundary)]
-    return _slsqp(lambda x: -G @ x, [trust, lambda x: -(b @ x + c)])
+    # the chord's ends in the unit-circle coordinates u of x = √(2δ)·L⁻ᵀu, where the line is wᵀu = −c
+    L = np.linalg.cholesky(H)
+    w = math.sqrt(2 * RADIUS) * np.linalg.solve(L, b)
+    ww = w @ w
+    ends = []
+    if c ** 2 <= ww:
+        across = np.array([-w[1], w[0]]) * math.sqrt(ww - c ** 2) / ww
+        ends = [math.sqrt(2 * RADIUS) * np.linalg.solve(L.T, -c * w / ww + sign * across) for sign in (1, -1)]
+    candidates = np.column_stack([boundary[:, b @ boundary + c <= 0], *ends])
+    return candidates[:, np.argmax(G @ candidates)]
 
 
 @pytest.mark.parametrize("b,c,case,active", [
