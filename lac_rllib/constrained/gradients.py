@@ -30,15 +30,19 @@ logger = logging.getLogger(__name__)
 
 
 @torch.no_grad()
-def zero_non_finite_(gradients_dict: dict) -> list:
+def zero_non_finite_(gradients_dict: dict, finite: torch.Tensor | None = None) -> list:
     """Replace, in ``gradients_dict``, each gradient with a NaN or inf by ``torch.nan_to_num`` of it
     (NaN → 0, ±inf → the largest finite float: RLlib's default); the keys replaced (usually none).
 
     The common case costs one read-back: the joint check of all gradients' norms. A norm is
     non-finite if its tensor is, and may also overflow for a finite one, so a failed joint check
-    looks at each tensor before touching it."""
+    looks at each tensor before touching it. ``finite``: that joint check already made on these
+    gradients' norms (:func:`clip_global_norms_`'s, which scales by a finite factor at most 1 and
+    so keeps finite gradients finite), its norms not computed again."""
     grads = [g for g in gradients_dict.values() if g is not None]
-    if not grads or bool(torch.stack(torch._foreach_norm(grads)).isfinite().all()):
+    if finite is None and grads:
+        finite = torch.stack(torch._foreach_norm(grads)).isfinite().all()
+    if not grads or bool(finite):
         return []
     bad = [ref for ref, g in gradients_dict.items() if g is not None and not bool(torch.isfinite(g).all())]
     for ref in bad:
@@ -59,14 +63,21 @@ def clip_global_norm_(grads: list, max_norm: float) -> torch.Tensor:
 
 
 @torch.no_grad()
-def clip_global_norms_(groups: list, max_norm: float) -> list:
+def clip_global_norms_(groups: list, max_norm: float, finite: list | None = None) -> list:
     """:func:`clip_global_norm_` of each group of gradients (one network's, one optimizer's) on its
-    own, all groups in one pass: one foreach norm and one multiply over every tensor."""
+    own, all groups in one pass: one foreach norm and one multiply over every tensor. ``finite``: a
+    list to which the joint check of every tensor's norm is appended (a 0-d bool tensor, not read
+    back), for :func:`zero_non_finite_` to reuse."""
     groups = [[g for g in grads if g is not None] for grads in groups]
     flat = [g for grads in groups for g in grads]
     if not flat:
+        if finite is not None:
+            finite.append(torch.tensor(True))
         return [torch.tensor(0.0) for _ in groups]
-    norms = torch.stack(torch._foreach_norm(flat, 2.0)).nan_to_num(neginf=-10e8, posinf=10e8)
+    norms = torch.stack(torch._foreach_norm(flat, 2.0))
+    if finite is not None:
+        finite.append(norms.isfinite().all())
+    norms = norms.nan_to_num(neginf=-10e8, posinf=10e8)
     totals, coefs, start = [], [], 0
     for grads in groups:
         total = (torch.linalg.vector_norm(norms[start:start + len(grads)], 2.0).nan_to_num(neginf=-10e8, posinf=10e8)

@@ -12,7 +12,8 @@ batch (``minibatch_size=None, num_epochs=1``) and hands the minibatch plan over 
 - the same rows in the same order: :func:`cyclic_minibatch_indices` replays the iterator's
   walk, its wrap-arounds and its reshuffles, drawing each permutation from numpy's global RNG as
   ``SampleBatch.shuffle`` does, so a seeded run makes the same draws;
-- each minibatch gathered with one ``index_select`` per column of the whole batch's tensors;
+- the minibatches' rows gathered with one ``index_select`` per column for 64 minibatches at a time,
+  each minibatch a slice of them (:func:`gathered_minibatches`);
 - the learner's own hooks, as ``TorchLearner._uncompiled_update`` calls them: ``forward_train``,
   ``compute_losses``, ``compute_gradients``, ``postprocess_gradients``, ``apply_gradients``.
 
@@ -97,6 +98,25 @@ def cyclic_minibatch_indices(sizes: dict[Any, int], *, minibatch_size: int, num_
         count += 1
 
 
+def gathered_minibatches(columns: dict[Any, dict[str, torch.Tensor]], plan: list[dict[Any, np.ndarray]],
+                         chunk: int = 64) -> Iterator[dict[Any, dict[str, torch.Tensor]]]:
+    """Each minibatch of ``plan`` (row indices per module) with its rows of every column: the rows
+    of ``chunk`` minibatches at a time gathered in one ``index_select`` per column, each minibatch
+    then a contiguous slice of them (a view: the same values, the same layout as its own gather;
+    a minibatch's tensors are read, never written, by the losses)."""
+    for first in range(0, len(plan), chunk):
+        part = plan[first:first + chunk]
+        gathered, bounds = {}, {}
+        for mid, cols in columns.items():
+            lengths = [len(indices[mid]) for indices in part]
+            idx = torch.from_numpy(np.concatenate([indices[mid] for indices in part]))
+            gathered[mid] = {k: v.index_select(0, idx) for k, v in cols.items()}
+            bounds[mid] = np.concatenate([[0], np.cumsum(lengths)]).tolist()
+        for j in range(len(part)):
+            yield {mid: {k: v[bounds[mid][j]:bounds[mid][j + 1]] for k, v in cols.items()}
+                   for mid, cols in gathered.items()}
+
+
 class FusedMinibatchLoop(TorchLearner):
     """A TorchLearner mixin: an update call whose ``timesteps`` carry :data:`TS_MINIBATCHES` runs
     that plan's minibatches inside its one ``_update`` (see the module's docstring); any other
@@ -130,13 +150,10 @@ class FusedMinibatchLoop(TorchLearner):
         fwd_out = loss_per_module = None
         plan = list(cyclic_minibatch_indices(sizes, **plan))
         try:
-            for i, indices in enumerate(plan):
+            for i, minibatch in enumerate(gathered_minibatches(columns, plan)):
                 self.reports_minibatch = i == len(plan) - 1
-                minibatch = {}
-                for mid, idx in indices.items():
-                    idx_t = torch.from_numpy(idx)
-                    minibatch[mid] = {k: v.index_select(0, idx_t) for k, v in columns[mid].items()}
-                    rows[mid] += len(idx)
+                for mid in minibatch:
+                    rows[mid] += len(plan[i][mid])
                 # RLModule.forward_train, not TorchRLModule's: the same forward without the train() call.
                 fwd_out = {mid: RLModule.forward_train(self.module[mid], mb) for mid, mb in minibatch.items()}
                 loss_per_module = self.compute_losses(fwd_out=fwd_out, batch=minibatch)

@@ -36,6 +36,20 @@ def test_non_finite_gradients_become_what_torch_learner_makes_of_them(caplog):
     assert "bad" in caplog.text
 
 
+def test_the_clips_finiteness_check_is_the_guards():
+    """clip_global_norms_'s check, handed to zero_non_finite_, decides as the guard's own."""
+    bad = torch.tensor([1.0, float("nan")])
+    for grads, finite_expected in (([torch.randn(3), torch.randn(2, 2)], True), ([torch.randn(3), bad.clone()], False)):
+        finite = []
+        clip_global_norms_([grads[:1], grads[1:]], 0.5, finite)
+        assert len(finite) == 1 and bool(finite[0]) is finite_expected
+        as_dict = dict(enumerate(grads))
+        assert zero_non_finite_(as_dict, finite[0]) == ([] if finite_expected else [1])
+        assert all(torch.isfinite(g).all() for g in as_dict.values())
+    # a check that says finite is trusted (the caller's promise: the clip saw these gradients)
+    assert zero_non_finite_({0: bad.clone()}, torch.tensor(True)) == []
+
+
 
 def test_the_step_equals_rllibs_own_guard_with_one_nan_gradient(one_torch_thread):
     """Our default (RLlib's per-tensor tests off, ours on) against RLlib's guard: the same weights

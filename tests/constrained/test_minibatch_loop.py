@@ -2,10 +2,16 @@
 
 import numpy as np
 import pytest
+import torch
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
-from lac_rllib.constrained.minibatch_loop import TS_MINIBATCHES, cyclic_minibatch_indices, update_kwargs
+from lac_rllib.constrained.minibatch_loop import (
+    TS_MINIBATCHES,
+    cyclic_minibatch_indices,
+    gathered_minibatches,
+    update_kwargs,
+)
 
 
 @pytest.mark.parametrize("n, size, epochs, shuffle, total", [
@@ -53,3 +59,20 @@ def test_an_empty_module_batch_is_refused():
     first, second = cyclic_minibatch_indices({"m": 5}, minibatch_size=4)  # one epoch: 4 rows, then 1 + 3 wrapped
     np.testing.assert_array_equal(first["m"], [0, 1, 2, 3])
     np.testing.assert_array_equal(second["m"], [4, 0, 1, 2])
+
+
+@pytest.mark.parametrize("chunk", [1, 3, 64])
+def test_gathered_minibatches_are_each_minibatchs_own_gather(chunk):
+    """A chunk's gather sliced per minibatch equals each minibatch's own index_select, bit for bit,
+    contiguous, for every module, across chunk edges and a short last minibatch."""
+    gen = torch.Generator().manual_seed(0)
+    columns = {"a": {"obs": torch.randn(37, 5, generator=gen), "mask": torch.rand(37, generator=gen) > 0.3},
+               "b": {"obs": torch.randn(20, 2, generator=gen)}}
+    np.random.seed(0)
+    plan = list(cyclic_minibatch_indices({"a": 37, "b": 20}, minibatch_size=8, num_epochs=3, shuffle=True))
+    got = list(gathered_minibatches(columns, plan, chunk=chunk))
+    assert len(got) == len(plan) == 14
+    for mb, indices in zip(got, plan, strict=True):
+        for mid, idx in indices.items():
+            for k, v in columns[mid].items():
+                assert mb[mid][k].is_contiguous() and torch.equal(mb[mid][k], v[torch.from_numpy(idx)])

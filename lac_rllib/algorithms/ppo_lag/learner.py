@@ -131,6 +131,8 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         self.cost_windows = {mid: collections.deque(maxlen=self.config.get_config_for_module(mid).cost_window)
                              for mid in self.module.keys()}
         self.progress: dict[str, EpochProgress] = {}
+        #: Each module's clip of this step: (its joint finiteness check, the gradients it saw).
+        self._clip_checks: list[tuple[torch.Tensor, set]] = []
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
         """ν of ``module``: Adam on ν itself [O common/lagrange.py] or on softplus⁻¹(ν) [S], or the
@@ -318,7 +320,9 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
             return dict(module_gradients_dict)
         named = [(name, self.filter_param_dict_for_optimizer(param_dict=module_gradients_dict, optimizer=optim))
                  for name, optim in self.get_optimizers_for_module(module_id)]
-        norms = clip_global_norms_([list(grads.values()) for _, grads in named], config.grad_clip)
+        finite = []
+        norms = clip_global_norms_([list(grads.values()) for _, grads in named], config.grad_clip, finite)
+        self._clip_checks.append((finite[0], {ref for _, grads in named for ref in grads}))
         if self.reports_minibatch:
             for (name, _), norm in zip(named, norms):
                 self.metrics.log_value((module_id, f"gradients_{name}_global_norm"), norm, window=1)
@@ -336,7 +340,14 @@ class PPOLagTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
                 for pid in self.filter_param_dict_for_optimizer(grads, optim):
                     del grads[pid]
                 optim.zero_grad(set_to_none=True)
-        zero_non_finite_(grads)  # RLlib's NaN/inf guard, one test for all (constrained/gradients.py)
+        # RLlib's NaN/inf guard, one test for all (constrained/gradients.py), read off the clip's
+        # norms when the clip saw every gradient left.
+        checks, self._clip_checks = self._clip_checks, []
+        covered = set().union(*(refs for _, refs in checks)) if checks else set()
+        finite = None
+        if checks and all(ref in covered for ref, g in grads.items() if g is not None):
+            finite = checks[0][0] if len(checks) == 1 else torch.stack([f for f, _ in checks]).all()
+        zero_non_finite_(grads, finite)
         if self.config.update_path != "fused":
             super().apply_gradients(grads)
             return
@@ -392,7 +403,10 @@ def add_l2_gradient_(params: list, coeff: float) -> None:
     addition in either order)."""
     params = [p for p in params if p.grad is not None]
     if params:
-        torch._foreach_add_([p.grad for p in params], torch._foreach_mul(params, 2.0 * coeff))
+        # The factor as a 0-d float32 tensor: the kernels cast a number to float32 first (the same
+        # product), and on CPU a Python number is wrapped into a tensor again for each parameter.
+        factor = torch.tensor(2.0 * coeff, dtype=params[0].dtype)
+        torch._foreach_add_([p.grad for p in params], torch._foreach_mul(params, factor))
 
 
 def gaussian_logp(logits: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
