@@ -78,16 +78,17 @@ def clip_global_norms_(groups: list, max_norm: float, finite: list | None = None
     if finite is not None:
         finite.append(norms.isfinite().all())
     norms = norms.nan_to_num(neginf=-10e8, posinf=10e8)
-    totals, coefs, start = [], [], 0
+    # Each group's total norm on its own, then the coefficient of every group in one vector of
+    # element-wise ops (each element's arithmetic is the 0-d tensor's: no reduction crosses groups).
+    totals, start = [], 0
     for grads in groups:
-        total = (torch.linalg.vector_norm(norms[start:start + len(grads)], 2.0).nan_to_num(neginf=-10e8, posinf=10e8)
-                 if grads else torch.tensor(0.0))
-        coef = torch.clamp(max_norm / torch.clamp(total + 1e-6, min=max_norm), max=1.0)
-        totals.append(total)
-        coefs.extend([coef] * len(grads))
+        totals.append(torch.linalg.vector_norm(norms[start:start + len(grads)], 2.0) if grads
+                      else torch.zeros((), dtype=norms.dtype))
         start += len(grads)
-    torch._foreach_mul_(flat, coefs)
-    return totals
+    totals = torch.stack(totals).nan_to_num(neginf=-10e8, posinf=10e8)
+    coefs = torch.clamp(max_norm / torch.clamp(totals + 1e-6, min=max_norm), max=1.0).unbind()
+    torch._foreach_mul_(flat, [coef for coef, grads in zip(coefs, groups) for _ in grads])
+    return list(totals.unbind())
 
 
 @torch.no_grad()
