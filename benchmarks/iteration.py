@@ -49,7 +49,10 @@ code at git revision ``REV`` (say, the commit an issue was filed against) beside
 same run (:mod:`revision`): two child processes, one importing REV's ``lac_rllib`` and one today's,
 each build the algorithm at the task's preset from the same seed (one CPU, one torch thread), train
 through a warm-up of ``--steps`` env steps, then train one iteration whenever the parent asks, the
-two in turn, until each has timed ``--steps``; prints seconds per ``--steps`` env steps and REV / today.
+two in turn, until each has timed ``--steps``; prints seconds per ``--steps`` env steps and REV / today,
+and the rows each side trained per env step (PPO-Lag's KL early stop cuts an iteration's epochs
+where the policy moved far: two revisions whose runs part do different amounts of work, so a
+ratio is read beside that column, and a longer ``--steps`` averages over more iterations).
 """
 
 from __future__ import annotations
@@ -352,7 +355,7 @@ def _write(path: str | None, lines: list[str]) -> None:
 def _serve(algo: str, task: str, seed: int, steps: int) -> int:
     """The child of ``--against``: builds ``algo`` with the ``lac_rllib`` on its path, trains
     through ``steps`` env steps of warm-up, announces it, then trains one iteration per request and
-    answers its seconds and env steps (:mod:`revision`)."""
+    answers its seconds, env steps and rows trained (:mod:`revision`)."""
     import json
 
     import ray
@@ -368,13 +371,17 @@ def _serve(algo: str, task: str, seed: int, steps: int) -> int:
     def lifetime():
         return algo_obj.metrics.peek(("env_runners", "num_env_steps_sampled_lifetime"), default=0)
 
+    def trained():  # rows through gradient steps (minibatch rows, every epoch), as RLlib counts them
+        return algo_obj.metrics.peek(("learners", "__all_modules__", "num_module_steps_trained_lifetime"), default=0)
+
     while lifetime() < steps:
         algo_obj.train()
     revision.announce()
     for _ in revision.requests():
-        start, t0 = lifetime(), time.perf_counter()
+        start, rows, t0 = lifetime(), trained(), time.perf_counter()
         algo_obj.train()
-        print(json.dumps({"s": time.perf_counter() - t0, "steps": lifetime() - start}), flush=True)
+        print(json.dumps({"s": time.perf_counter() - t0, "steps": lifetime() - start, "trained": trained() - rows}),
+              flush=True)
     algo_obj.stop()
     return 0
 
@@ -384,19 +391,23 @@ def time_against(rev: str, algos: list[str], task: str, seed: int, steps: int) -
     import revision
 
     with revision.unpacked(rev) as (short, tree):
-        lines = [f"| algorithm | s per {steps:,} env steps, {short} | today | {short} / today | iterations timed |",
-                 "|---|---:|---:|---:|---:|"]
+        lines = [f"| algorithm | s per {steps:,} env steps, {short} | today | {short} / today | iterations timed "
+                 f"| rows trained per env step, {short} / today |",
+                 "|---|---:|---:|---:|---:|---:|"]
         for a in algos:
             args = ["--serve", a, "--tasks", task, "--seed", str(seed), "--steps", str(steps)]
             with revision.pair(short, tree, __file__, args) as children:
-                seconds, done, n = dict.fromkeys(children, 0.0), dict.fromkeys(children, 0), 0
+                seconds, done, rows, n = (dict.fromkeys(children, 0.0), dict.fromkeys(children, 0),
+                                          dict.fromkeys(children, 0), 0)
                 while min(done.values()) < steps:
                     for k, reply in revision.ask(children).items():
                         seconds[k] += reply["s"]
                         done[k] += reply["steps"]
+                        rows[k] += reply.get("trained", 0)
                     n += 1
             old, new = (seconds[k] * steps / done[k] for k in (short, "today"))
-            lines.append(f"| {a} | {old:.2f} | {new:.2f} | {old / new:.2f}x | {n} each |")
+            work = " / ".join(f"{rows[k] / done[k]:.1f}" for k in (short, "today"))
+            lines.append(f"| {a} | {old:.2f} | {new:.2f} | {old / new:.2f}x | {n} each | {work} |")
             print(lines[-1], flush=True)
     return lines
 

@@ -10,6 +10,8 @@ PPO-Lag one (cProfile, PointGoal1 presets: docs/speed.md). Our configs set RLlib
 :func:`zero_non_finite_` before ``super().apply_gradients``: one test over all gradients, and where
 it fails RLlib's own treatment, ``torch.nan_to_num`` of each non-finite gradient with RLlib's
 warning. For finite gradients (every step of a healthy run) the update is the same, bit for bit.
+A learner that clips every gradient first hands the clip's joint check of the same norms to the
+guard (PPO-Lag's house), so a step computes those norms once.
 
 :func:`clip_global_norm_` and :func:`polyak_` are RLlib's ``clip_gradients(grad_clip_by=
 "global_norm")`` and ``update_target_network`` in the same arithmetic, bit for bit

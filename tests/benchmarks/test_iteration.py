@@ -43,3 +43,5 @@ def test_against_times_the_iterations_of_another_commits_code_beside_todays(caps
     assert old > 0 and new > 0 and abs(ratio - old / new) <= rounding + 1e-9, row
     assert 0.5 < ratio < 2.0, row  # the same code on both sides
     assert cells[3] == "1 each", row  # 2,000 steps: one of the tiny preset's 2,000-step iterations
+    old_rows, new_rows = (float(x) for x in row.split("|")[6].split(" / "))
+    assert old_rows == new_rows > 1, row  # one seed, the same code: the same minibatch rows trained
