@@ -24,15 +24,18 @@ class OneThreadPerEnvRunner(RLlibCallback):
             torch.set_num_threads(1)
 
 
-def learner_torch(threads: int) -> None:
+def learner_torch(threads: int, flush_denormal: bool = False) -> None:
     """The learner process's torch: ``threads`` intra-op threads, and fresh tensors left unfilled.
     RLlib's seeding turns on torch's deterministic algorithms (``set_torch_seed``), and with them
     torch fills every tensor ``torch.empty`` makes (each dtype cast among them) with NaN, a write
     that only shows in code reading memory it never wrote. Off, every seeded run repeats as before,
     bit for bit, and a gradient step is 2-6% faster (PPO-Lag's 64-row one most: docs/speed.md).
-    Every learner's ``build`` calls it."""
+    Every learner's ``build`` calls it. ``flush_denormal``: denormal floats flushed to zero in this
+    process (``torch.set_flush_denormal``; it changes bits: a field of the algorithm's, off unless
+    set; the process's env runner, when it samples in the driver, flushes too)."""
     torch.set_num_threads(threads)
     torch.utils.deterministic.fill_uninitialized_memory = False
+    torch.set_flush_denormal(flush_denormal)  # set either way: a process may build several learners
 
 
 def set_runners(config, num_env_runners: int, cpus: int) -> None:

@@ -44,3 +44,22 @@ def test_every_learner_leaves_fresh_tensors_unfilled_under_rllibs_determinism(ra
         assert torch.get_num_threads() == algo.config.torch_threads
     finally:
         algo.stop()
+
+
+def _flushes() -> bool:
+    """Whether this process flushes denormals: a denormal float32 product reads 0."""
+    tiny = torch.tensor([1e-30], dtype=torch.float32)
+    return bool((tiny * 1e-10 == 0).all())
+
+
+@pytest.mark.parametrize("flush", [True, False])
+def test_sac_lags_flush_denormal_field_sets_the_learners_process(ray_session, flush):
+    """flush_denormal=True flushes denormals in the learner's process, False (the default) leaves
+    them, whatever an earlier learner in the process set."""
+    torch.set_flush_denormal(not flush)
+    algo = build_config("sac_lag", "lac/PointHazard-v0", 0, {"flush_denormal": flush}, timesteps=100_000).build_algo()
+    try:
+        assert _flushes() is flush
+    finally:
+        algo.stop()
+        torch.set_flush_denormal(False)

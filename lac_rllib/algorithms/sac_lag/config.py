@@ -133,6 +133,13 @@ class SACLagParams(SafeTaskParams):
     """Keep the replay buffer in checkpoints [D], so a resumed run trains on the data it had."""
     torch_threads: int = param(1, accepts=INT_GE_1)
     """Intra-op torch threads of the learner process [D]; a sweep sets it to the CPUs of a trial."""
+    flush_denormal: bool = param(False, accepts=BOOL)
+    """Flush denormal floats to zero in the learner's process [D] (``torch.set_flush_denormal``).
+    Adam's moments and their squared gradients pass through denormals, which x86 CPUs compute
+    slowly: on an Intel Xeon with AMX the PointGoal1 step's fused Adam took 1.9 ms in the learner
+    against 0.24 ms on fresh data, and flushing took the step from 8.7-9.0 to 7.2-7.8 ms (PPO-Lag's:
+    ~2%). It changes bits (values below ~1.2e-38 become 0), so False until learning curves at equal
+    seeds show it learns the same (docs/speed.md)."""
     update_path: str = param("fused", accepts=one_of(UPDATE_PATHS))
     """How an update call makes its steps [D]: "fused", its minibatches inside one learner
     ``_update`` with fewer calls per step (the same rows, order and maths, bit for bit;

@@ -88,7 +88,8 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
 
     @override(TorchLearner)
     def build(self) -> None:
-        learner_torch(self.config.torch_threads)  # threads; no NaN fill of fresh tensors (constrained/cpus.py)
+        # threads; no NaN fill of fresh tensors; denormals flushed if asked (constrained/cpus.py)
+        learner_torch(self.config.torch_threads, flush_denormal=self.config.flush_denormal)
         super().build()  # the learner connector comes from SACLagConfig.build_learner_connector
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None)
