@@ -22,6 +22,16 @@ def ray_session():
     ray.shutdown()
 
 
+@pytest.fixture(autouse=True)
+def no_denormal_flush_after():
+    """A learner built in a test may flush denormals in this process (SAC-Lag's ``flush_denormal``,
+    process-wide in torch); the next test starts without, as a fresh process does."""
+    yield
+    import torch
+
+    torch.set_flush_denormal(False)
+
+
 @pytest.fixture(scope="module")
 def one_torch_thread():
     """Thousands of tiny ops: intra-op threads only add sync overhead (10x on a busy 2-core box)."""
