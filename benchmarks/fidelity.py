@@ -336,7 +336,9 @@ def report(out: Path, task: str, order: list[str], timesteps: int | None, compar
     disk = {(p.parent.parent.name, int(p.parent.name[4:])) for p in out.glob("runs/*/seed*/progress.jsonl")}
     earlier = sorted({(v, int(s_)) for v, s_ in zip(df["variant"], df["seed"])} - disk)
     if earlier:
-        budget += ("\n\nFrom earlier reports' curves (" + ", ".join(str(p) for p in include) + "), their run "
+        # The included files named as the commands name runs: under the run root, no machine's path.
+        named = ", ".join(f"{RUN_ROOT}/{Path(p).resolve().parent.name}/{Path(p).name}" for p in include)
+        budget += ("\n\nFrom earlier reports' curves (" + named + "), their run "
                    "directories gone: " + ", ".join(f"{v} seed {s_}" for v, s_ in earlier) + ".")
         commands += sorted(earlier_commands(include, earlier))
     table, common = final_table(df, task, order, compare_at, variant_algos(commands))

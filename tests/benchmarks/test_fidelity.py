@@ -52,6 +52,7 @@ def test_included_curves_add_the_runs_not_on_disk_and_disk_wins(fidelity, tmp_pa
     (now / "runs" / "ppo_lag" / "seed1" / "command.txt").write_text("lac-train --output /now/runs/ppo_lag/seed1")
     text = fidelity.report(now, "lac/PointHazard-v0", ["ppo_lag"], None, include=[earlier / "curves.csv"])
     assert "their run directories gone: ppo_lag seed 0." in text
+    assert "From earlier reports' curves (RUN_DIR/earlier/curves.csv)" in text and str(tmp_path) not in text
     commands = text.split("Commands:")[1]
     # the old absolute paths, rewritten with the run root as the placeholder
     assert "--output RUN_DIR/gone/runs/ppo_lag/seed0" in commands

@@ -138,8 +138,10 @@ class SACLagParams(SafeTaskParams):
     Adam's moments and their squared gradients pass through denormals, which x86 CPUs compute
     slowly: on an Intel Xeon with AMX the PointGoal1 step's fused Adam took 1.9 ms in the learner
     against 0.24 ms on fresh data, and flushing took the step from 8.7-9.0 to 7.2-7.8 ms (PPO-Lag's:
-    ~2%). It changes bits (values below ~1.2e-38 become 0), so False until learning curves at equal
-    seeds show it learns the same (docs/speed.md)."""
+    ~2%). It changes bits (values below ~1.2e-38 become 0): at equal seeds on PointGoal1 the runs
+    repeat the default's exactly through 124-158k env steps, then part as seeds do, in 1.35x less
+    wall time (docs/fidelity/pointgoal1-sac-lag-flush); False until a run past 200k, where ν acts,
+    shows the same."""
     update_path: str = param("fused", accepts=one_of(UPDATE_PATHS))
     """How an update call makes its steps [D]: "fused", its minibatches inside one learner
     ``_update`` with fewer calls per step (the same rows, order and maths, bit for bit;
