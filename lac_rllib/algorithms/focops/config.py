@@ -42,6 +42,13 @@ class FOCOPSParams(OnPolicyLagParams):
     focops_eta: float = param(0.02, accepts=POSITIVE)
     """η of the per-state indicator 1[KL(π_θ ‖ π_old)[s] ≤ η]: a state whose policy has moved
     further than η drops out of the loss [O focops_eta 0.02; F eta 0.02]."""
+    focops_indicator: str = param("per_row", accepts=one_of(("per_row", "broadcast")))
+    """How the indicator 1[KL ≤ η] meets the surrogate. "per_row": the paper's eq. (11) per state
+    [F focops_main.py, its tensors all (B, 1)]: a row beyond η loses its surrogate gradient.
+    "broadcast": OmniSafe 0.5.0's loss [O focops.py:103-107, ``(kl − r·A/λ_F)·1[kl ≤ η]`` with kl
+    (B, 1) and r·A (B,), a B × B matrix, averaged]: mean_i(1_i·kl_i) − f·mean_j(r_j·A_j)/λ_F with f
+    the fraction of rows inside η, so every row keeps its surrogate gradient, scaled by f. The
+    ``omnisafe`` preset takes "broadcast" (OmniSafe's step, tests/algorithms/test_golden.py)."""
     nu_divides_advantage: bool = param(True, accepts=BOOL)
     """A = (A^R − ν·A^C)/(1 + ν) (True) [O FOCOPS._compute_adv_surrogate], or A^R − ν·A^C (False) [F
     focops_main.py], whose scale grows with ν."""
@@ -67,7 +74,7 @@ PAPER = {"nu_init": 0.0, "nu_optimizer": "sgd", "lagrangian_lr": 0.01, "nu_max":
          "train_batch_size_per_learner": 2048, "num_epochs": 10, "minibatch_size": 64, "num_envs_per_env_runner": 1}
 PRESETS: dict[str, dict[str, Any]] = {
     **{name: dict(values) for name, values in ppo_lag.PRESETS.items() if name != "ssa"},  # [O] as PPO-Lag's
-    "omnisafe": {"lr_decay_horizon": OMNISAFE_BUDGET},
+    "omnisafe": {"lr_decay_horizon": OMNISAFE_BUDGET, "focops_indicator": "broadcast"},
     "paper": PAPER,
 }
 

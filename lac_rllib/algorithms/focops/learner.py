@@ -36,11 +36,15 @@ class FOCOPSTorchLearner(PPOLagTorchLearner):
         return advantages / (1.0 + nu) if config.nu_divides_advantage else advantages
 
     def policy_loss(self, module_id, config, module, batch, logits, logp, advantages, masked_mean):
-        """Eq. (11) per row (the module docstring)."""
+        """Eq. (11) per row (the module docstring), or OmniSafe's broadcast of it
+        (``focops_indicator="broadcast"``): its B × B mean written per row, 1_i·kl_i − f·r_i·A_i/λ_F
+        with f = mean_j 1_j, whose mean over the rows is [O]'s mean over the matrix."""
         dist_cls = module.get_train_action_dist_cls()
         kl = kl_to_reference(dist_cls, logits, batch[Columns.ACTION_DIST_INPUTS])
         inside = within(kl, config.focops_eta)
         ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
         if self.reports_minibatch:
             self.metrics.log_value((module_id, TRUST_REGION_FRACTION), masked_mean(inside), window=1)
+        if config.focops_indicator == "broadcast":
+            return kl * inside - masked_mean(inside) * ratio * advantages / config.focops_lam, None
         return (kl - ratio * advantages / config.focops_lam) * inside, None
