@@ -21,8 +21,11 @@ report (in ``--out``):
 - ``curves.csv``: every iteration of every run;
 - ``table.md``: per variant, the mean over the final 10% of each run's env steps, then mean ± std
   over seeds, beside the paper's number for the task (docs/spec.md §7, docs/fidelity/README.md) and,
-  for Safety-Gymnasium PointGoal1, OmniSafe's published SACLag/PPOLag. Runs are compared at
-  equal budget: every curve is cut at the smallest env-step count all runs reached.
+  for Safety-Gymnasium PointGoal1, OmniSafe's published SACLag/PPOLag (and the published figures of
+  the baselines the variants run). Runs are compared at equal budget: every curve is cut at the
+  smallest env-step count all runs reached; a published figure is the source's at that budget where
+  it has one (OmniSafe's at 500k, 1M and 2.5M are read from its curves, ± the reading's tolerance),
+  else its final one, its env steps named.
 
 The commands a report shows (each run's ``command.txt`` and table.md's "Commands:" block) name the
 run directory with the run root as a placeholder, ``RUN_DIR/<out dir name>/runs/<variant>/seed<k>``:
@@ -56,11 +59,11 @@ PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)
     "focops/HumanoidVelocity-v0": ((5023.27, 107.99), (20.12, 0.58)),
     "focops/HumanoidCircle-v0": ((925.03, 111.95), (49.57, 1.16)),
 }
-OMNISAFE = {  # OmniSafe's benchmark tables (cost limit 25); per algorithm: sweeps/published.yaml
-    "SafetyPointGoal1-v0": [("OmniSafe SAC-Lag, 3M steps", (21.45, 6.97), (19.17, 9.72)),
-                            ("OmniSafe PPO-L, 10M steps", (12.96, 6.95), (25.80, 34.99)),
-                            ("unconstrained SAC (OmniSafe)", (27.04, None), (67.57, None))],
-}
+#: OmniSafe's figures (sweeps/published.yaml, cost limit 25) shown on a task whatever the variants
+#: run, by our algorithm names: each at the runs' budget where it has one there, else its final.
+OMNISAFE = {"SafetyPointGoal1-v0": ("sac_lag", "ppo_lag")}
+#: OmniSafe's unconstrained SAC (its off-policy table, 3e6 steps), shown beside them: (label, return, cost).
+UNCONSTRAINED_SAC = {"SafetyPointGoal1-v0": ("unconstrained SAC (OmniSafe), 3M steps", 27.04, 67.57)}
 #: OmniSafe's unconstrained on-policy rows (10M steps, its on-policy table), shown beside a run of
 #: the Lagrangian algorithm named (as sweeps/published.yaml names it) with its multiplier pinned at 0.
 UNCONSTRAINED = {"SafetyPointGoal1-v0": {"TRPO-L": ("unconstrained TRPO (OmniSafe), 10M steps", 27.20, 45.88),
@@ -225,19 +228,46 @@ def variant_algos(commands: list[str]) -> dict[str, tuple[str, bool]]:
     return out
 
 
-def published_rows(task: str, variants: dict, shown: list[str]) -> list[str]:
-    """Table rows of the published figures (sweeps/published.yaml: the paper's and OmniSafe's) of
-    the algorithms the variants run (``variants``: :func:`variant_algos`), those not already
-    ``shown``; OmniSafe's unconstrained row beside a variant that pins the multiplier at 0."""
+def figure_row(name: str, f, budget: int | None) -> str:
+    """A published figure (sweeps/published.py's Figure) as a table row named ``name``: beside runs
+    compared at ``budget`` env steps, its reading there (read from the source's curve, ± the
+    reading's tolerance) where it has one, else its final figure, each named with its steps."""
+    from sweeps.table import steps_text
+
+    r = f.at(budget)
+    if r is None:
+        return f"| {name}, {steps_text(f.steps)} steps | | {_fmt(*f.return_)} | {_fmt(*f.cost)} | | | |"
+    cost = "–" if r.cost is None else f"{r.cost:g} (read ±{r.tolerance.cost:g})"
+    return (f"| {name}, {steps_text(r.steps)} steps, read from a curve | | {r.return_:g} (read "
+            f"±{r.tolerance.return_:g}) | {cost} | | | |")
+
+
+def published_figures(task: str, variants: dict, shown=(), always: tuple[str, ...] = ()) -> list[tuple]:
+    """(row name, figure) of the published figures (sweeps/published.yaml: the paper's and OmniSafe's)
+    of OmniSafe's ``always`` algorithms and of the algorithms the variants run (``variants``:
+    :func:`variant_algos`), those whose name is not among ``shown``."""
     from lac_rllib.algorithms.registry import DEFAULT_ALGO
     from sweeps.published import ROWS, published
 
-    pub, lines = published(), []
-    for algo in dict.fromkeys(a for a, pinned in variants.values() if a != DEFAULT_ALGO and not pinned):
-        for row, label in ROWS.items():
-            f, name = pub.find(row, task, algo), f"{label} {pub.algorithms.get(algo, algo)}"
-            if f and not any(n.startswith(f"{name},") for n in shown):
-                lines.append(f"| {name}, {f.steps / 1e6:g}M steps | | {_fmt(*f.return_)} | {_fmt(*f.cost)} | | | |")
+    pub, out = published(), {}
+    run = dict.fromkeys(a for a, pinned in variants.values() if a != DEFAULT_ALGO and not pinned)
+    for algo, rows in [*((a, ("omnisafe",)) for a in always), *((a, tuple(ROWS)) for a in run)]:
+        for row in rows:
+            f, name = pub.find(row, task, algo), f"{ROWS[row]} {pub.algorithms.get(algo, algo)}"
+            if f and name not in shown:
+                out.setdefault(name, f)
+    return list(out.items())
+
+
+def published_rows(task: str, variants: dict, shown: list[str], budget: int | None = None) -> list[str]:
+    """Table rows (:func:`figure_row`, at ``budget``) of :func:`published_figures` of the algorithms
+    the variants run, those not already ``shown`` (row labels, ``"OmniSafe PPO-L, 10M steps"``);
+    OmniSafe's unconstrained row beside a variant that pins the multiplier at 0."""
+    from sweeps.published import published
+
+    pub = published()
+    lines = [figure_row(name, f, budget) for name, f in
+             published_figures(task, variants, [n.split(",")[0] for n in shown])]
     for algo, pinned in variants.values():
         entry = UNCONSTRAINED.get(task, {}).get(pub.algorithms.get(algo, algo))
         if pinned and entry:
@@ -282,10 +312,22 @@ def final_table(df, task: str, order: list[str], compare_at: int | None = None,
     if task in PAPER:
         (r, rs), (c, cs) = PAPER[task]
         lines.append(f"| paper LAC, 2.5M steps | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
-    for name, (r, rs), (c, cs) in OMNISAFE.get(task, []):
-        lines.append(f"| {name} | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
-    lines += published_rows(task, variants or {}, shown=[n for n, *_ in OMNISAFE.get(task, [])])
+    from sweeps.published import published
+
+    pub = published()
+    always = published_figures(task, {}, always=OMNISAFE.get(task, ()))
+    lines += [figure_row(name, f, common) for name, f in always]
+    if task in UNCONSTRAINED_SAC:
+        name, r, c = UNCONSTRAINED_SAC[task]
+        lines.append(f"| {name} | | {_fmt(r, None)} | {_fmt(c, None)} | | | |")
+    lines += published_rows(task, variants or {}, [name for name, _ in always], common)
     lines += ["", f"Cost limit {limit:g}."]
+    images = dict.fromkeys(pub.sources[f.source].curves[f.curve]
+                           for _, f in always + published_figures(task, variants or {}) if f.at(common))
+    if images:
+        lines += ["", "Read from a curve: the height of the source's mean curve at that budget in "
+                  + ", ".join(f"[{Path(url).name}]({url})" for url in images)
+                  + " (sweeps/published.yaml), ± the reading's tolerance, not a std over seeds."]
     if short:
         lines += ["", f"Not yet at {common:,} steps, so not in the table: {', '.join(short)}."]
     return "\n".join(lines), common

@@ -2,9 +2,12 @@
 OmniSafe's benchmark on our simulator, as data checked when read.
 
 Each figure has a source (with its URL, simulator, env steps and per-task limit), our task id and
-algorithm name, and [mean, std] of return and cost as the source prints them. A bad file is one
-line, ``FILE:LINE: key.path: what is wrong`` (:class:`PublishedError`). sweeps/table.py places
-them under its cells.
+algorithm name, and [mean, std] of return and cost as the source prints them. A figure may also
+carry ``at_steps``: the same curve at earlier budgets, read off the source's published learning-curve
+image with a stated tolerance (:class:`AtSteps`), so a run at 500k is set beside the source at 500k
+rather than at its final 1e7 (:meth:`Figure.at`). A bad file is one line,
+``FILE:LINE: key.path: what is wrong`` (:class:`PublishedError`). sweeps/table.py and
+benchmarks/fidelity.py place them beside their runs.
 """
 
 from __future__ import annotations
@@ -22,6 +25,9 @@ from sweeps.bounded_yaml import read_text as read_yaml_text
 from sweeps.sweep_file import MAX_BUDGET, Int, KeyedError, Origin, Real, SafeName
 
 PUBLISHED_FILE = Path(__file__).with_name("published.yaml")
+#: A run is at a reading's steps when its budget is within this fraction of them: a reading is the
+#: curve's height over +-3 pixel columns (+-49k env steps on a 1e7-step figure), no sharper than that.
+AT_STEPS_SLACK = 0.05
 #: The rows of published figures under each task (a source's ``row``) and their labels, in print order.
 ROWS = {"paper": "paper", "omnisafe": "OmniSafe"}
 
@@ -68,6 +74,50 @@ class Source(BaseModel):
     """What else a reader must know to compare with it."""
     tasks: dict[str, SourceTask] = Field(min_length=1)
     """Our task id → the source's name of it and its limit."""
+    curves: dict[SafeName, Annotated[str, Field(pattern=r"^https://\S+$", max_length=400)]] = {}
+    """The source's published learning-curve images that its figures' ``at_steps`` were read from:
+    a short id → the image's URL at a commit."""
+
+
+class Tolerance(BaseModel):
+    """How far a reading off a curve image may be from the curve's value: ± in the figure's units."""
+
+    model_config = _schema()
+    return_: Std = Field(alias="return")
+    """± of the return read."""
+    cost: Std | None = None
+    """± of the cost read (absent where the cost is not readable)."""
+
+
+class AtSteps(BaseModel):
+    """The figure's algorithm on its task at an earlier budget: the height of the source's published
+    mean curve at ``steps`` env steps, read off the image (pixel positions of the gridlines and of the
+    curve's own colour; docs/sweeps.md, "Figures read from a curve"). A curve's height is a mean
+    over seeds as the source smooths and plots it, not its table's statistic: the ± is the reading's
+    tolerance, not a std."""
+
+    model_config = _schema()
+    steps: Int(1, MAX_BUDGET)
+    """Env steps at which the curve was read (fewer than the figure's own)."""
+    return_: Real = Field(alias="return")
+    """The mean return curve's height there."""
+    cost: Real | None = None
+    """The mean cost curve's height there; absent where the figure does not show it (``note`` says why)."""
+    read_from_figure: Literal[True]
+    """Always true: an intermediate figure a source prints in a table is a figure of its own (a
+    source or a figure ``steps``), so everything here was read off a curve."""
+    tolerance: Tolerance
+    """± of the reading."""
+    note: Text | None = None
+    """What limits the reading (a curve off the axis, hidden by another)."""
+
+    @model_validator(mode="after")
+    def _cost_or_why(self):
+        if self.cost is None and self.note is None:
+            raise KeyedError(("note",), "a reading without a cost must say why (note)")
+        if (self.cost is None) != (self.tolerance.cost is None):
+            raise KeyedError(("tolerance", "cost"), "a cost read needs its tolerance, and only a cost read has one")
+        return self
 
 
 class Figure(BaseModel):
@@ -91,6 +141,22 @@ class Figure(BaseModel):
     """The limit of its runs (default: its source's for the task)."""
     note: Text | None = None
     """What differs for this figure (e.g. the algorithm's own limit)."""
+    curve: SafeName | None = None
+    """The image ``at_steps`` were read from: a key of its source's ``curves``."""
+    at_steps: tuple[AtSteps, ...] = ()
+    """The same curve at earlier budgets, read off ``curve`` (ascending steps)."""
+
+    def at(self, steps: int | None) -> AtSteps | None:
+        """The reading beside a run of ``steps`` env steps (within :data:`AT_STEPS_SLACK` of its
+        steps), None where there is none: the figure beside such a run is the final one."""
+        if steps is None:
+            return None
+        return next((r for r in self.at_steps if abs(steps - r.steps) <= AT_STEPS_SLACK * r.steps), None)
+
+    def steps_at(self, steps: int | None) -> int:
+        """The env steps of what stands beside a run of ``steps``: a reading's, else the figure's."""
+        r = self.at(steps)
+        return r.steps if r else self.steps
 
 
 class Published(BaseModel):
@@ -118,6 +184,7 @@ class Published(BaseModel):
             if f.algo not in self.algorithms:
                 raise KeyedError(("figures", i, "algo"), f"{f.algo!r} is not in algorithms; accepted: "
                                                          f"{', '.join(self.algorithms)}")
+            _check_readings(f, src, i)
             if (f.source, f.task, f.algo) in seen:
                 raise KeyedError(("figures", i), f"a second figure of {f.algo} on {f.task} from {f.source}")
             seen.add((f.source, f.task, f.algo))
@@ -135,6 +202,24 @@ class Published(BaseModel):
     def task_order(self) -> list[str]:
         """Our task ids in the order the sources list them (the papers' row order)."""
         return list(dict.fromkeys(t for s in self.sources.values() for t in s.tasks))
+
+
+def _check_readings(f: Figure, src: Source, i: int) -> None:
+    """A figure's readings: off a named image of its source, before its own steps, each budget once."""
+    if f.curve is not None and f.curve not in src.curves:
+        raise KeyedError(("figures", i, "curve"), f"{f.curve!r} is not a curve of {f.source}; accepted: "
+                                                  f"{', '.join(src.curves) or 'none (the source has no curves)'}")
+    if f.at_steps and f.curve is None:
+        raise KeyedError(("figures", i, "curve"), "at_steps are read off a curve: name it (a key of the source's "
+                                                  "curves)")
+    final = f.steps or src.steps
+    steps = [r.steps for r in f.at_steps]
+    for j, n in enumerate(steps):
+        if n >= final:
+            raise KeyedError(("figures", i, "at_steps", j, "steps"),
+                             f"{n:,} is not before the figure's own {final:,} env steps (the figure is that)")
+        if j and n <= steps[j - 1]:
+            raise KeyedError(("figures", i, "at_steps", j, "steps"), "at_steps go in ascending steps, each once")
 
 
 def load_published(path: str | Path = PUBLISHED_FILE, text: str | None = None) -> Published:

@@ -14,7 +14,9 @@ Conventions:
   (the paper's blue); ties at the printed precision (2 decimals) are all marked.
 - Below the cells, the same algorithm on the same task as published (sweeps/published.yaml): the
   paper's figure (Table 1 or 2) and, on Safety-Gymnasium's tasks, OmniSafe's; blank where a source
-  has none. Each at its source's env steps, said beside it.
+  has none. Each at the sweep's own budget where the source has a figure there (OmniSafe's at 500k,
+  1M and 2.5M are read from its published curves: "read from a curve", ± the reading's tolerance,
+  not a std), else its final one at the source's env steps, said beside it.
 - The table states the sweep's budget (env steps per trial) and, when it is not the published
   figures' budget, says so: a quick-budget table is a machinery check, not the paper's result.
 - No table (None, ""): fewer than two algorithms in the trials (an ablation, a search), or an
@@ -41,7 +43,7 @@ import pandas as pd  # noqa: E402
 from lac_rllib.algorithms.registry import DEFAULT_ALGO  # noqa: E402
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN  # noqa: E402
 from sweeps.configurations import fmt_num, is_na, prepared  # noqa: E402
-from sweeps.published import ROWS, Figure, Published, Source, published  # noqa: E402
+from sweeps.published import ROWS, AtSteps, Figure, Published, Source, published  # noqa: E402
 from sweeps.score import described  # noqa: E402
 from sweeps.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
 
@@ -168,13 +170,24 @@ def budget_caption(table: Table, budget_steps: int, budget_note: str = "") -> st
     """What the table's runs had and what the published figures beside them had: a table at
     another budget never reads as the paper's."""
     text = f"Budget: {budget_steps:,} env steps per trial" + (f" ({budget_note})" if budget_note else "")
-    steps = {}
+    steps, read = {}, []
     for f in _shown_figures(table):
-        steps.setdefault(table.published.sources[f.source].row, set()).add(f.steps)
+        row = table.published.sources[f.source].row
+        steps.setdefault(row, set()).add(f.steps_at(budget_steps))
+        if f.at(budget_steps) and row not in read:
+            read.append(row)
     if not steps:
         return text + "."
     theirs = "; ".join(f"{ROWS[r]}'s at {' and '.join(steps_text(s) for s in sorted(v))}"
                        for r, v in steps.items())
+    if read:  # some figures are at this budget, read from a source's curves
+        lead = f"{text}, the paper's" if steps.get("paper") == {budget_steps} else text
+        elsewhere = any(f.steps_at(budget_steps) != budget_steps and not f.at(budget_steps)
+                        for f in _shown_figures(table))
+        who = " and ".join(f"{ROWS[r]}'s" for r in read)
+        return (f"{lead}. The published figures beside the cells: {theirs} env steps; {who} at this budget are "
+                "read from its published curves (± the reading's tolerance, not a std)"
+                + ("; one at another budget is a reference, not a result at this one." if elsewhere else "."))
     if steps.get("paper") == {budget_steps}:
         return f"{text}, the paper's. The published figures beside the cells: {theirs} env steps."
     return (f"{text}, not the published figures' ({theirs} env steps): they are beside the cells as a reference, "
@@ -199,23 +212,44 @@ def _ours(cell: Cell | None, which: str, intervals: bool = True) -> str:
     return text
 
 
-def _published_rows(table: Table, task: str) -> list[tuple[str, list[Figure | None], bool]]:
+def _published_rows(table: Table, task: str, budget: int | None = None
+                    ) -> list[tuple[str, list[Figure | None], bool]]:
     """(row label, the figure per algorithm or None, whether each cell names its steps) for each
-    source row with a figure on ``task``; a label names the steps when its figures share them."""
+    source row with a figure on ``task``; a label names the steps when its figures share them (a
+    figure's at a run of ``budget`` steps: :meth:`Figure.steps_at`)."""
     rows = []
     for key, label in ROWS.items():
         figs = [table.published.find(key, task, a) for a in table.algos]
-        steps = {f.steps for f in figs if f is not None}
+        steps = {f.steps_at(budget) for f in figs if f is not None}
         if steps:
             one = len(steps) == 1
             rows.append((f"{label} ({steps_text(next(iter(steps)))})" if one else label, figs, not one))
     return rows
 
 
-def _figure_text(f: Figure | None, with_steps: bool) -> str:
+def _figure_text(f: Figure | None, with_steps: bool, budget: int | None = None) -> str:
+    """A figure as a cell: beside a run of ``budget`` steps, its reading there where it has one."""
     if f is None:
         return ""
+    r = f.at(budget)
+    if r is not None:
+        return f"{reading_text(r)} ({steps_text(r.steps) + ', ' if with_steps else ''}read from a curve)"
     return f"{_pm(f.return_)} / {_pm(f.cost)}" + (f" ({steps_text(f.steps)})" if with_steps else "")
+
+
+def reading_text(r: AtSteps) -> str:
+    """A reading off a curve, return / cost, each ± the reading's tolerance as written: ``16.2 ±1 / 59 ±2``."""
+    cost = "–" if r.cost is None else f"{r.cost:g} ±{r.tolerance.cost:g}"
+    return f"{r.return_:g} ±{r.tolerance.return_:g} / {cost}"
+
+
+def _value(f: Figure, which: str, budget: int | None) -> float:
+    """The mean return (``which="ret"``) or cost beside a run of ``budget`` steps (NaN: not read)."""
+    r = f.at(budget)
+    if r is not None:
+        v = r.return_ if which == "ret" else r.cost
+        return math.nan if v is None else v
+    return (f.return_ if which == "ret" else f.cost)[0]
 
 
 def legend_line(intervals: bool = True) -> str:
@@ -225,12 +259,23 @@ def legend_line(intervals: bool = True) -> str:
             "(ties kept). Below each task: the same algorithm as published, return / cost (blank: none published).")
 
 
-def _sources(table: Table) -> tuple[list[Source], list[str]]:
-    """The sources of the figures shown, and the figures' own notes (once per algorithm and note)."""
+def _sources(table: Table, budget: int | None = None) -> tuple[list[Source], list[str]]:
+    """The sources of the figures shown, and the figures' own notes (once per algorithm and note),
+    then, per source, the curves the figures beside a run of ``budget`` steps were read from."""
     shown = _shown_figures(table)
     notes = dict.fromkeys((f.algo, ROWS[table.published.sources[f.source].row], f.note) for f in shown if f.note)
+    curves = {}  # source -> (the readings' steps, the images' URLs)
+    for f in shown:
+        if f.at(budget) is not None:
+            steps, urls = curves.setdefault(f.source, ({}, {}))  # dicts: ordered, each once
+            steps[f.at(budget).steps] = None
+            urls[table.published.sources[f.source].curves[f.curve]] = None
+    read = [f"{ROWS[table.published.sources[k].row]} at {' and '.join(steps_text(n) for n in steps)}: read from a "
+            f"curve, the height of its mean curve in {', '.join(f'[{Path(url).name}]({url})' for url in urls)} (± "
+            'the reading\'s tolerance, not a std; docs/sweeps.md, "Figures read from a curve")'
+            for k, (steps, urls) in curves.items()]
     return ([table.published.sources[k] for k in dict.fromkeys(f.source for f in shown)],
-            [f"{table.name(algo)} ({col}): {note}" for algo, col, note in notes])
+            [f"{table.name(algo)} ({col}): {note}" for algo, col, note in notes] + read)
 
 
 def _source_text(s: Source) -> str:
@@ -238,9 +283,10 @@ def _source_text(s: Source) -> str:
             + (f". {s.note}" if s.note else ""))
 
 
-def sources_lines(table: Table) -> list[str]:
-    """The sources of the figures shown as markdown list items, then the figures' own notes."""
-    sources, notes = _sources(table)
+def sources_lines(table: Table, budget: int | None = None) -> list[str]:
+    """The sources of the figures shown as markdown list items, then the figures' own notes and the
+    curves the figures beside a run of ``budget`` steps were read from."""
+    sources, notes = _sources(table, budget)
     return ([f"- {ROWS[s.row]}: [{s.title}]({s.url}); {_source_text(s)}" for s in sources]
             + [f"- {note}" for note in notes])
 
@@ -260,12 +306,12 @@ def markdown(table: Table, budget_steps: int, budget_note: str = "", intervals: 
         lines.append(row(f"`{task}` ({_limit_text(table.limits[task])})", "return",
                          *(_ours(c, "ret", intervals) for c in cells)))
         lines.append(row("", "cost", *(_ours(c, "cost", intervals) for c in cells)))
-        lines += [row("", label, *(_figure_text(f, each) for f in figs))
-                  for label, figs, each in _published_rows(table, task)]
+        lines += [row("", label, *(_figure_text(f, each, budget_steps) for f in figs))
+                  for label, figs, each in _published_rows(table, task, budget_steps)]
     counts = [c.n_seeds for c in table.cells.values() if c.n_seeds]
     lines += ["", legend_line(intervals), "", f"Scores: {described(table.scores)}. {seeds_line(counts)}"]
     if sources and _shown_figures(table):
-        lines += ["", "Published figures:", *sources_lines(table)]
+        lines += ["", "Published figures:", *sources_lines(table, budget_steps)]
     return "\n".join(lines) + "\n"
 
 
@@ -324,13 +370,16 @@ def _html_ours(cell: Cell | None, which: str) -> str:
     return f'<td title="{html.escape(hover)}">{text}</td>'
 
 
-def _html_figure(table: Table, f: Figure | None, with_steps: bool) -> str:
+def _html_figure(table: Table, f: Figure | None, with_steps: bool, budget: int | None = None) -> str:
     if f is None:
         return '<td class="pub"></td>'
-    s = table.published.sources[f.source]
-    hover = (f"{s.title}: {s.tasks[f.task].name}, {f.steps:,} env steps, limit {f.cost_limit:g}, {s.simulator}"
+    s, r = table.published.sources[f.source], f.at(budget)
+    at = (f"{f.steps:,} env steps" if r is None else
+          f"{r.steps:,} env steps, read from its curve {s.curves[f.curve]} (± the reading's tolerance, not a std)"
+          + (f"; {r.note}" if r.note else ""))
+    hover = (f"{s.title}: {s.tasks[f.task].name}, {at}, limit {f.cost_limit:g}, {s.simulator}"
              + (f". {f.note}" if f.note else ""))
-    return f'<td class="pub" title="{html.escape(hover)}">{html.escape(_figure_text(f, with_steps))}</td>'
+    return f'<td class="pub" title="{html.escape(hover)}">{html.escape(_figure_text(f, with_steps, budget))}</td>'
 
 
 def table_html(table: Table, budget_steps: int, path, budget_note: str = "") -> str:
@@ -347,9 +396,9 @@ def table_html(table: Table, budget_steps: int, path, budget_note: str = "") -> 
                     f'<td class="what">return</td>{"".join(_html_ours(c, "ret") for c in cells)}</tr>')
         rows.append(f'<tr><td></td><td class="what">cost</td>{"".join(_html_ours(c, "cost") for c in cells)}</tr>')
         rows += [f'<tr><td></td><td class="what">{html.escape(label)}</td>'
-                 f'{"".join(_html_figure(table, f, each) for f in figs)}</tr>'
-                 for label, figs, each in _published_rows(table, task)]
-    found, notes = _sources(table)
+                 f'{"".join(_html_figure(table, f, each, budget_steps) for f in figs)}</tr>'
+                 for label, figs, each in _published_rows(table, task, budget_steps)]
+    found, notes = _sources(table, budget_steps)
     sources = "".join([f'<li>{ROWS[s.row]}: <a href="{html.escape(s.url)}">{html.escape(s.title)}</a>; '
                        f"{html.escape(_source_text(s))}</li>" for s in found]
                       + [f"<li>{html.escape(note)}</li>" for note in notes])
@@ -382,7 +431,7 @@ def table_png(table: Table, budget_steps: int, path, budget_note: str = "") -> s
                 for key, (marker, colour) in MARKERS.items():
                     f = table.published.find(key, task, algo)
                     if f is not None:
-                        ax.plot((f.return_ if which == "ret" else f.cost)[0], yi, marker, color=colour, ms=6, mew=1)
+                        ax.plot(_value(f, which, budget_steps), yi, marker, color=colour, ms=6, mew=1)
             ax.axvline(0, color="black", lw=0.5)
             ax.set_yticks(y, [_tick(table, a, c) for a, c in zip(table.algos, cells)], fontsize=9)
             for tick, cell in zip(ax.get_yticklabels(), cells):

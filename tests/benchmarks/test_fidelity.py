@@ -140,3 +140,38 @@ def test_the_plot_leaves_out_a_panel_no_run_has_values_for(fidelity, tmp_path, m
     (run / "progress.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     fidelity.report(tmp_path / "lac", "lac/PointHazard-v0", ["lac"], None)
     assert made == [3, 4]
+
+
+PG = "SafetyPointGoal1-v0"
+LAG_PG1 = "https://github.com/Gaiejj/omnisafe_benchmarks_cruve/blob/9e1f6126be173c35fe8ad8683c9b8a95d6c51373/off-policy/benchmarks/lag_pointgoal1_3e6.png"  # noqa: E501
+FIRST_ORDER_PG1 = "https://github.com/Gaiejj/omnisafe_benchmarks_cruve/blob/9e1f6126be173c35fe8ad8683c9b8a95d6c51373/on-policy/benchmarks/first_order_pointgoal1_1e7.png"  # noqa: E501
+
+
+def _curves(steps: int):
+    """One PPO-L run, an iteration every 50k env steps up to ``steps``."""
+    import pandas as pd
+
+    n = steps // 50_000
+    return pd.DataFrame({"variant": "ppo", "seed": 0, "iteration": range(1, n + 1),
+                         "env_steps": [50_000.0 * (i + 1) for i in range(n)], "episode_return": 1.0,
+                         "episode_cost": 2.0, "cost_limit": 25.0, "nu": 0.1, "langevin_at_bound": float("nan")})
+
+
+def test_a_run_at_500k_is_set_beside_omnisafes_figure_at_500k_read_from_its_curve(fidelity):
+    text, common = fidelity.final_table(_curves(500_000), PG, ["ppo"], variants={"ppo": ("ppo_lag", False)})
+    assert common == 500_000
+    # OmniSafe's PPO-L and SAC-Lag at 500k, read off its curves: labelled so, each with the reading's ±.
+    assert "| OmniSafe PPO-L, 500k steps, read from a curve | | 16.2 (read ±1) | 59 (read ±2) | | | |" in text
+    assert "| OmniSafe SAC-Lag, 500k steps, read from a curve | | 25.6 (read ±1) | 47 (read ±4) | | | |" in text
+    assert "12.96" not in text and "21.45" not in text  # not their 1e7 / 3e6 tables
+    assert (f"Read from a curve: the height of the source's mean curve at that budget in [lag_pointgoal1_3e6.png]"
+            f"({LAG_PG1}), [first_order_pointgoal1_1e7.png]({FIRST_ORDER_PG1}) (sweeps/published.yaml), ± the "
+            "reading's tolerance, not a std over seeds.") in text
+    assert text.count("| OmniSafe PPO-L,") == 1  # shown once though the variant runs it too
+    # Nothing is read at 750k: the final figures, each with its budget, and no curve named.
+    text, _ = fidelity.final_table(_curves(750_000), PG, ["ppo"], variants={"ppo": ("ppo_lag", False)})
+    assert "| OmniSafe PPO-L, 10M steps | | 12.96 ± 6.95 | 25.80 ± 34.99 | | | |" in text
+    assert "| OmniSafe SAC-Lag, 3M steps | | 21.45 ± 6.97 | 19.17 ± 9.72 | | | |" in text
+    assert "read from a curve" not in text.lower()
+    # The paper's figure has no reading at 750k either: its 2.5M, said.
+    assert "| paper PPO-L, 2.5M steps | | 11.36 ± 4.23 | 16.48 ± 10.95 | | | |" in text

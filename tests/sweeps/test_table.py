@@ -101,11 +101,57 @@ def test_the_table_states_its_budget_and_is_the_papers_only_at_the_papers():
                             "10M env steps)")
     assert "the paper's." not in quick
     paper = table.markdown(t, 2_500_000)
+    # OmniSafe's PointGoal1 figures at 2.5M are read from its curves (its table is at 10M).
     assert "Budget: 2,500,000 env steps per trial, the paper's. The published figures beside the cells: paper's at " \
-           "2.5M; OmniSafe's at 10M env steps." in paper
+           "2.5M; OmniSafe's at 2.5M env steps; OmniSafe's at this budget are read from its published curves (± the " \
+           "reading's tolerance, not a std)." in paper
     # No figure published for the tasks: the budget alone.
     other = hand_trials().assign(task=lambda d: d["task"].map({PG: "lac/PointHazard-v0", ANT: "lac/CostProbe-v0"}))
     assert "Budget: 2,500,000 env steps per trial.\n" in table.markdown(table.build_table(other), 2_500_000)
+
+
+CURVE = "https://github.com/Gaiejj/omnisafe_benchmarks_cruve/blob/9e1f6126be173c35fe8ad8683c9b8a95d6c51373/on-policy/benchmarks/first_order_pointgoal1_1e7.png"  # noqa: E501
+
+
+def test_a_run_at_500k_is_set_beside_the_figure_read_at_500k_not_the_final_one():
+    """OmniSafe's P3O and PPO-L on PointGoal1 at 500k, read off its first-order curve image: in the
+    cells, labelled as read from a curve with the reading's tolerance, the image named under the table."""
+    t = table.build_table(hand_trials())
+    md = table.markdown(t, 500_000)
+    rows = _rows(md)
+    assert rows[(PG, "OmniSafe (500k)")] == ["-0.1 ±0.5 / 37 ±2 (read from a curve)",
+                                             "16.2 ±1 / 59 ±2 (read from a curve)", ""]
+    assert not any(label == "OmniSafe (10M)" for _, label in rows)
+    assert "12.96" not in md and "1.60 ± 3.01" not in md  # the 1e7 figures are not beside a 500k run
+    assert rows[(PG, "paper (2.5M)")][1] == "11.36 ± 4.23 / 16.48 ± 10.95"  # the paper has no 500k: its own steps
+    assert "Budget: 500,000 env steps per trial. The published figures beside the cells: paper's at 2.5M; OmniSafe's " \
+           "at 500k env steps; OmniSafe's at this budget are read from its published curves (± the reading's " \
+           "tolerance, not a std); one at another budget is a reference, not a result at this one." in md
+    assert f"- OmniSafe at 500k: read from a curve, the height of its mean curve in [first_order_pointgoal1_1e7.png]" \
+           f"({CURVE})" in md
+    # Within 5% of a reading's steps is at it (a reading is no sharper); 1M is its own reading.
+    assert _rows(table.markdown(t, 490_000))[(PG, "OmniSafe (500k)")][1] == "16.2 ±1 / 59 ±2 (read from a curve)"
+    assert _rows(table.markdown(t, 1_000_000))[(PG, "OmniSafe (1M)")][1] == "18.5 ±0.5 / 51 ±2 (read from a curve)"
+
+
+def test_a_run_at_a_budget_without_a_reading_gets_the_final_figure_labelled_with_its_budget(tmp_path):
+    t = table.build_table(hand_trials())
+    rows = _rows(table.markdown(t, 750_000))
+    assert rows[(PG, "OmniSafe (10M)")] == ["1.60 ± 3.01 / 31.10 ± 80.03", "12.96 ± 6.95 / 25.80 ± 34.99", ""]
+    # SAC-Lag's final figure is at 3M: a row of mixed budgets names each cell's, readings included.
+    trials = pd.concat([hand_trials(), pd.DataFrame([_trial(PG, "sac_lag", s, 20.0, 20.0) for s in range(3)])])
+    mixed = table.build_table(trials)
+    assert _rows(table.markdown(mixed, 750_000))[(PG, "OmniSafe")] == [
+        "1.60 ± 3.01 / 31.10 ± 80.03 (10M)", "12.96 ± 6.95 / 25.80 ± 34.99 (10M)",
+        "21.45 ± 6.97 / 19.17 ± 9.72 (3M)", ""]
+    assert _rows(table.markdown(mixed, 500_000))[(PG, "OmniSafe (500k)")][2] == \
+        "25.6 ±1 / 47 ±4 (read from a curve)"
+    # The page says the same on hover: the image and the tolerance's meaning, or the final figure's steps.
+    table.table_html(t, 500_000, tmp_path / "t.html")
+    page = (tmp_path / "t.html").read_text()
+    assert "500,000 env steps, read from its curve " + CURVE + " (± the reading&#x27;s tolerance" in page
+    table.table_html(t, 750_000, tmp_path / "t.html")
+    assert "SafetyPointGoal1-v0, 10,000,000 env steps, limit 25" in (tmp_path / "t.html").read_text()
 
 
 def test_the_report_writes_markdown_html_with_intervals_on_hover_and_a_png(tmp_path):
@@ -206,6 +252,34 @@ def test_a_malformed_figure_is_refused_naming_its_line_and_field(tmp_path, figur
         load_published(path)
     path.write_text(GOOD_SOURCE + "  - {source: s1, task: %s, algo: lac, return: [1.0, 0.1], cost: [2.0, 0.1]}\n" % PG)
     assert load_published(path).figures[0].steps == 100  # the source's, filled in
+
+
+GOOD_CURVE = GOOD_SOURCE.replace("    tasks:", "    curves: {c1: https://example.org/c1.png}\n    tasks:")
+FIGURE = "  - {source: s1, task: %s, algo: lac, return: [1.0, 0.1], cost: [2.0, 0.1], steps: 100, " % PG
+
+
+@pytest.mark.parametrize("figure,needle", [
+    ("curve: c1, at_steps: [{steps: 50, return: 1.0, cost: 2.0, tolerance: {return: 0.5, cost: 1}}]}\n",
+     r"bad\.yaml:12: figures\[0\]\.at_steps\[0\]\.read_from_figure: Field required"),
+    ("curve: c1, at_steps: [{steps: 50, return: 1.0, cost: 2.0, read_from_figure: true}]}\n",
+     r"bad\.yaml:12: figures\[0\]\.at_steps\[0\]\.tolerance: Field required"),
+    ("curve: c1, at_steps: [{steps: 50, return: 1.0, read_from_figure: true, tolerance: {return: 0.5}}]}\n",
+     r"figures\[0\]\.at_steps\[0\]\.note: a reading without a cost must say why"),
+    ("at_steps: [{steps: 50, return: 1.0, cost: 2.0, read_from_figure: true, tolerance: {return: 0.5, cost: 1}}]}\n",
+     r"figures\[0\]\.curve: at_steps are read off a curve"),
+    ("curve: c2, at_steps: []}\n", r"figures\[0\]\.curve: 'c2' is not a curve of s1; accepted: c1"),
+    ("curve: c1, at_steps: [{steps: 100, return: 1.0, cost: 2.0, read_from_figure: true, "
+     "tolerance: {return: 0.5, cost: 1}}]}\n", r"at_steps\[0\]\.steps: 100 is not before the figure's own 100"),
+])
+def test_a_malformed_reading_is_refused_naming_its_line_and_field(tmp_path, figure, needle):
+    path = tmp_path / "bad.yaml"
+    path.write_text(GOOD_CURVE + FIGURE + figure)
+    with pytest.raises(PublishedError, match=needle):
+        load_published(path)
+    path.write_text(GOOD_CURVE + FIGURE + "curve: c1, at_steps: [{steps: 50, return: 1.0, cost: 2.0, "
+                                          "read_from_figure: true, tolerance: {return: 0.5, cost: 1}}]}\n")
+    f = load_published(path).figures[0]
+    assert (f.at(50).return_, f.at(48), f.at(60), f.steps_at(60)) == (1.0, f.at_steps[0], None, 100)
 
 
 def test_a_source_without_steps_is_refused(tmp_path):
