@@ -64,8 +64,10 @@ def critic_targets(batch: dict, fwd_out: dict, config) -> tuple[torch.Tensor, to
         y_C = c + γ_C·(1 − d)·Q'_C(s', squash(μ(s')))
 
     d = terminated: time-limit truncation bootstraps, as OmniSafe stores done = terminated ∧ ¬truncated.
-    The inputs come from the module's forward without gradient, so neither target carries one."""
-    not_done = 1.0 - batch[Columns.TERMINATEDS].float()
+    The inputs come from the module's forward without gradient, so neither target carries one.
+    1 − d in the critics' dtype (float32 in a run, as before: the same bits), so that γ·(1 − d) is
+    not rounded to float32 in a float64 step (tests/algorithms/sac_lag/test_sac_lag_golden.py)."""
+    not_done = 1.0 - batch[Columns.TERMINATEDS].to(fwd_out[M.Q_COST_NEXT].dtype)
     soft_next = fwd_out[M.Q_REWARD_NEXT].min(0).values - config.alpha * fwd_out[M.LOGP_NEXT]
     y_r = batch[Columns.REWARDS] + config.gamma * not_done * soft_next
     y_c = batch[COSTS] + config.cost_gamma * not_done * fwd_out[M.Q_COST_NEXT]
@@ -77,8 +79,9 @@ def actor_loss(actor_out: dict, nu: torch.Tensor, alpha: float) -> torch.Tensor:
 
         L_π = mean_B( α·log π(ã|s) − min_j Q_Rj(s, ã) + λ·Q_C(s, ã) ) / (1 + λ)
 
-    λ is a constant here (the multiplier's value, no gradient)."""
-    nu = nu.detach()
+    λ is a constant here (the multiplier's value, no gradient), in the critics' dtype: OmniSafe adds
+    ``1 + λ.item()`` in Python floats, so in a float64 step 1 + λ is not rounded to float32."""
+    nu = nu.detach().to(actor_out[M.Q_COST_PI].dtype)
     per_sample = alpha * actor_out[M.LOGP] - actor_out[M.Q_REWARD_PI].min(0).values + nu * actor_out[M.Q_COST_PI]
     return per_sample.mean() / (1.0 + nu)
 

@@ -81,8 +81,15 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         return self._sample(*self.actor(obs))
 
     def _sample(self, mean: torch.Tensor, log_std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        u = mean + log_std.exp() * torch.randn_like(mean)
+        u = mean + log_std.exp() * self.standard_normal(mean)
         return squash(u, self.action_low, self.action_high), squashed_log_prob(u, mean, log_std)
+
+    def standard_normal(self, like: torch.Tensor) -> torch.Tensor:
+        """ε ~ N(0, I) shaped as ``like``: the noise of every reparameterised sample the learner
+        draws (the reward target's a', the actor loss's ã). The one seam through which a test
+        feeds a reference's recorded ε instead (tests/algorithms/sac_lag/test_sac_lag_golden.py
+        replaces it on an instance)."""
+        return torch.randn_like(like)
 
     # ----- training (learner) -----
     @override(TorchRLModule)

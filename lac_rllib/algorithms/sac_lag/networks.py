@@ -32,6 +32,13 @@ class SquashedGaussianActor(nn.Module):
         return mean, log_std.clamp(self.log_std_min, self.log_std_max)
 
 
+#: log 2 of the tanh Jacobian. OmniSafe's actor holds it as a float32 buffer (gaussian_sac_actor.py
+#: ``register_buffer('_log2', torch.log(torch.tensor(2.0)))``): in a float32 step the same number as
+#: this one; widened by its ``.double()`` it stays 1.9e-9 below log 2, and the float64 golden test
+#: (tests/algorithms/sac_lag/test_sac_lag_golden.py) sets this name to that value to compare to 1e-11.
+LOG_2 = math.log(2.0)
+
+
 def squash(u: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
     """tanh(u) mapped affinely onto [low, high], as RLlib's TorchSquashedGaussian does (OmniSafe acts
     in [−1, 1] and rescales in its env wrapper: the same map)."""
@@ -42,7 +49,7 @@ def squashed_log_prob(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor
     """log π(squash(u)) for u ~ N(mean, σ²), summed over the action → (B,): the Gaussian's density
     minus log|d tanh/du| = 2·(log 2 − u − softplus(−2u)), the stable form OmniSafe and RLlib use.
     The affine map onto the bounds adds a constant, left out as both leave it out."""
-    jacobian = 2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))
+    jacobian = 2.0 * (LOG_2 - u - F.softplus(-2.0 * u))
     return gaussian_log_prob(u, mean, log_std) - jacobian.sum(-1)
 
 
