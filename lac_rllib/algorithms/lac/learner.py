@@ -67,9 +67,11 @@ def critic_targets(batch, q_next: torch.Tensor, n_reward: int, config) -> tuple[
     ``q_next`` is the target ensemble Q' at (s', ã') (E, B); k_r = ``reward_scale``, γ_C =
     ``cost_gamma``. d = terminated: time-limit truncation bootstraps [D] unless
     ``bootstrap_on_truncation`` is off, d = terminated ∨ truncated, which reproduces [C]."""
-    done = batch[Columns.TERMINATEDS].float()
+    # d in the critics' dtype: float32 as before in training; in a float64 step (the golden test)
+    # a float32 d would round γ·(1 − d) to float32.
+    done = batch[Columns.TERMINATEDS].to(q_next.dtype)
     if not config.bootstrap_on_truncation:
-        done = torch.maximum(done, batch[Columns.TRUNCATEDS].float())
+        done = torch.maximum(done, batch[Columns.TRUNCATEDS].to(q_next.dtype))
     min_q_r = reward_rows(q_next, n_reward).min(0).values
     max_q_c = cost_rows(q_next, n_reward).max(0).values
     y_r = config.reward_scale * batch[Columns.REWARDS] + config.gamma * (1 - done) * min_q_r

@@ -110,14 +110,19 @@ class LACTorchRLModule(ActorCriticRLModule):
         out[ACTOR_TARGET_ACTION] = target_action
         return out
 
-    def langevin(self, obs, mean, log_std, *, steps=None, step_size=None, generator=None) -> ChainResult:
+    def langevin(self, obs, mean, log_std, *, steps=None, step_size=None, generator=None,
+                 noise=None) -> ChainResult:
         """Algorithm 1 at ``obs`` with the online critics, ν and this module's chain settings.
 
-        ``mean``/``log_std`` are π_φ'(·|obs); ``steps``/``step_size`` override T and η.
+        ``mean``/``log_std`` are π_φ'(·|obs); ``steps``/``step_size`` override T and η. ``noise``
+        (T+1, B, A), optional: the chain's draws, z₀ of the start then z₁..z_T
+        (:func:`~lac_rllib.algorithms.lac.langevin.langevin_chain`), for a step compared draw for
+        draw with another implementation's (tests/algorithms/lac/test_lac_golden.py).
         """
         settings = (self.chain_settings if steps is None and step_size is None
                     else self.chain_settings.with_steps(steps, step_size))
-        return langevin_chain(self.critics, obs, mean, log_std, self.nu, settings, generator=generator)
+        return langevin_chain(self.critics, obs, mean, log_std, self.nu, settings, noise=noise,
+                              generator=generator)
 
     # ----- RLlib APIs -----
     @override(TargetNetworkAPI)
