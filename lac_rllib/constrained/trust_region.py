@@ -248,7 +248,7 @@ def _cpo_dual(q: float, r: float, s: float, c: float, A: float, B: float, max_kl
     if convention not in ("paper", "omnisafe"):
         raise ValueError(f"convention must be 'paper' or 'omnisafe', not {convention!r}")
     r_d = r if omnisafe else -r
-    split = r_d / (c if c != 0 else EPS)
+    split = r_d / (c + EPS) if omnisafe else r_d / (c if c != 0 else EPS)  # [O cpo.py:307: c + 1e-8]
 
     def project(x: float, low: float, high: float) -> float:
         return min(max(x, low), high) if omnisafe else max(low, min(x, high))
@@ -275,21 +275,25 @@ class PCPOStep:
 
 
 def pcpo_step(g: Tensor, b: Tensor, hinv_g: Tensor, hinv_b: Tensor, c: float, max_kl: float, *,
-              metric: str = "kl", q: float | None = None) -> PCPOStep:
+              metric: str = "kl", q: float | None = None, hx: Tensor | None = None, kl_dims: int = 1) -> PCPOStep:
     """PCPO's reward step then projection onto the cost half-space {Δ: bᵀΔ + c ≤ 0} [PCPO eq. 7]:
 
         Δ = η·H⁻¹g − max(0, (η·bᵀH⁻¹g + c) / bᵀL⁻¹b)·L⁻¹b,   η = √(2δ/gᵀH⁻¹g).
 
     ``metric="kl"``: L = H, the KL projection; ``"l2"``: L = I, the Euclidean one. ``"omnisafe"``:
-    [O pcpo.py:80, 102-109], whose reward step is η·H(H⁻¹g) = η·g (the plain gradient, to CG's
-    residual) while the projection's coefficient is the KL one, computed for η·H⁻¹g; so its step
-    does not land on the boundary unless H ∝ I. Its line search is CPO's, case 0."""
+    [O pcpo.py:80, 102-109], whose reward step is η·H(H⁻¹g) (``hx``, the damped product of the
+    solve; g, which it equals to CG's residual, if not given) while the projection's coefficient is
+    the KL one, computed for η·H⁻¹g; so its step does not land on the boundary unless H ∝ I. [O]'s
+    KL is the mean over the action's dimensions: on a KL summed over ``kl_dims`` of them, δ is
+    kl_dims times [O]'s and q = xᵀHx 1/kl_dims (H·x is the same), so η is kl_dims times [O]'s
+    and its reward step is η·Hx/kl_dims; the projection's term does not depend on the units. Its
+    line search is CPO's, case 0."""
     if metric not in ("kl", "l2", "omnisafe"):
         raise ValueError(f"metric must be 'kl', 'l2' or 'omnisafe', not {metric!r}")
     q = float(g @ hinv_g) if q is None else float(q)
     r, s = float(g @ hinv_b), float(b @ hinv_b)
     eta = math.sqrt(2 * max_kl / (q + EPS))
-    half = eta * (g if metric == "omnisafe" else hinv_g)
+    half = eta * (((g if hx is None else hx) / kl_dims) if metric == "omnisafe" else hinv_g)
     direction, norm = (b, float(b @ b)) if metric == "l2" else (hinv_b, s)
     nu = max(0.0, (eta * r + c) / (norm + EPS))  # η·r = bᵀ(η·H⁻¹g), the reward step's cost change
     return PCPOStep(half - nu * direction, nu, q, r, s)

@@ -53,7 +53,8 @@ class CPOParams(CostStepParams):
     dual_convention: str = param("paper", accepts=one_of(DUAL_CONVENTIONS))
     """The closed-form dual of cases 1-2: "paper", Achiam et al.'s App. 10.2 with r = gᵀH⁻¹b
     taken in its minimising sign [S agents.py]; "omnisafe", [O cpo.py:291-326]'s, which puts the
-    ascent-form r into those formulas (a sign error: its ν* is not the problem's)."""
+    ascent-form r into those formulas (a sign error: its ν* is not the problem's); the ``omnisafe``
+    preset takes it (tests/algorithms/cpo/test_cpo_golden.py: [O]'s λ* < 0 in case 2 there)."""
     backtrack_iters: int = param(20, accepts=INT_GE_1)
     """Fractions 1, c, c², … of the step the line search tries before it keeps θ_old [O
     _update_actor: total_steps=20; S backtrack_iters 10]."""
@@ -65,7 +66,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "safety_gym": {"num_envs_per_env_runner": 10},  # [O] CPO.yaml is the defaults (speed only, as TRPO-Lag's)
     "mujoco": {"num_envs_per_env_runner": 5},
     "tiny": dict(trpo_lag.TINY_TRUST_REGION),  # [D] TRPO-Lag's tiny sizes
-    "omnisafe": {},
+    # [O]'s own step: its KL (so its damping) and its dual (tests/algorithms/cpo/test_cpo_golden.py).
+    "omnisafe": {**trpo_lag.PRESETS["omnisafe"], "dual_convention": "omnisafe"},
     "ssa": SSA,
 }
 

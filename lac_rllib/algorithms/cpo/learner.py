@@ -79,18 +79,20 @@ class CPOTorchLearner(TRPOLagTorchLearner):
         loss_old, cost_old = loss(), cost()
         g, b = -flat_grad(loss_old, policy.params), flat_grad(cost_old, policy.params)
         fvp = fisher_vector_product(policy.mean_kl, policy.params, config.cg_damping)
-        x, p = conjugate_gradient(fvp, g, config.cg_iters), conjugate_gradient(fvp, b, config.cg_iters)
+        x, p = (conjugate_gradient(fvp, v, config.cg_iters, eps=config.cg_eps) for v in (g, b))
         c = self.cost_gap(module_id, config)
-        step, nu, case, logs = self.constrained_step(config, g, b, x, p, c, max_kl, float(x @ fvp(x)))
+        hx = fvp(x)  # H·H⁻¹g: q = xᵀHx [O cpo.py:380], and PCPO's [O]-variant reward step
+        step, nu, case, logs = self.constrained_step(config, policy, g, b, x, p, c, max_kl, hx)
         accept = cpo_acceptance(loss, cost, policy.mean_kl, float(loss_old.detach()), float(cost_old.detach()), c,
                                 max_kl, case)
         self.metrics.log_dict({NU: nu, COST_GAP: c if math.isfinite(c) else float("nan"), **logs},
                               key=module_id, window=1)
         return self.search(policy, step, accept, config, loss)
 
-    def constrained_step(self, config, g, b, x, p, c, max_kl, q):
-        """(Δθ, ν, the case the line search tests, values to log): CPO's [CPO App. 10.2; O cpo.py:215-338]."""
-        out = cpo_step(g, b, x, p, c, max_kl, q=q, convention=config.dual_convention)
+    def constrained_step(self, config, policy: PolicyOnBatch, g, b, x, p, c, max_kl, hx):
+        """(Δθ, ν, the case the line search tests, values to log): CPO's [CPO App. 10.2; O cpo.py:215-338].
+        ``hx`` = H·x, the damped Fisher product of x = H⁻¹g."""
+        out = cpo_step(g, b, x, p, c, max_kl, q=float(x @ hx), convention=config.dual_convention)
         return out.step_direction, out.nu, out.case, {CPO_CASE: out.case}
 
     def cost_gap(self, module_id, config) -> float:

@@ -17,6 +17,7 @@ from typing import Any
 
 from lac_rllib.algorithms.cpo import config as cpo
 from lac_rllib.algorithms.cpo.config import CostStepParams, CPOConfig
+from lac_rllib.algorithms.trpo_lag import config as trpo_lag
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
 
@@ -39,13 +40,19 @@ class PCPOParams(CostStepParams):
     """The step: "kl", eq. 7's, η·H⁻¹g − max(0, (η·gᵀH⁻¹b + c)/bᵀH⁻¹b)·H⁻¹b with η = √(2δ/gᵀH⁻¹g),
     the reward's TRPO step projected in the KL metric [P]; "l2", projected in the Euclidean one
     (L = I) [P]; "omnisafe", [O pcpo.py:80, 102-109], whose reward step is η·H(H⁻¹g) ≈ η·g (the plain
-    gradient) with the KL projection's coefficient."""
+    gradient) with the KL projection's coefficient, η and H in [O]'s units (its KL averaged over
+    the action's dimensions: on the summed KL, kl_convention="sum", the reward step is divided by
+    act_dim, as [O]'s δ and q would make it); with the ``omnisafe`` preset it is [O]'s step exactly
+    (tests/algorithms/pcpo/test_pcpo_golden.py). Before that division (and with η·g for η·Hx) the
+    reward step was act_dim times [O]'s on the default KL."""
     backtrack_iters: int = param(200, accepts=INT_GE_1)
     """Fractions 1, c, c², … of the step the line search tries before it keeps θ_old [O
     _update_actor: total_steps=200]."""
 
 
 PRESETS: dict[str, dict[str, Any]] = {name: dict(values) for name, values in cpo.PRESETS.items() if name != "ssa"}
+# [O]'s KL and CG; PCPO has no dual to set (tests/algorithms/pcpo/test_pcpo_golden.py).
+PRESETS["omnisafe"] = dict(trpo_lag.PRESETS["omnisafe"])
 
 #: PCPO's fields and what each accepts (lac_rllib/algorithms/registry.py).
 FIELDS = fields.FieldSet(PCPOParams, "PCPO")

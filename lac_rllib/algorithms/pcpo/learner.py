@@ -3,9 +3,10 @@
 
 With CPO's g, b, x = H⁻¹g, p = H⁻¹b and c (cpo/learner.py), the step is the reward's TRPO step
 projected onto {Δ: c + bᵀΔ ≤ 0} (``projection``: the KL metric [P], the Euclidean one, or
-[O]'s variant along η·g), then CPO's line search as [O] calls it for PCPO: case 0, so the reward's
-loss may rise, the cost surrogate by at most max(−c, 0), and KL̄ ≤ δ [O pcpo.py:111-124, 200
-tries]. ``nu`` reports the projection's coefficient, 0 when the reward's step is feasible.
+[O]'s variant along η·Hx ≈ η·g in [O]'s units, its KL averaged over the action's dimensions),
+then CPO's line search as [O] calls it for PCPO: case 0, so the reward's loss may rise, the cost
+surrogate by at most max(−c, 0), and KL̄ ≤ δ [O pcpo.py:111-124, 200 tries]. ``nu`` reports the
+projection's coefficient, 0 when the reward's step is feasible.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from lac_rllib.constrained.trust_region import pcpo_step
 
 
 class PCPOTorchLearner(CPOTorchLearner):
-    def constrained_step(self, config, g, b, x, p, c, max_kl, q):
+    def constrained_step(self, config, policy, g, b, x, p, c, max_kl, hx):
         """(Δθ, ν, the case the line search tests, values to log): PCPO's [P eq. 7; O pcpo.py:102-109]."""
-        out = pcpo_step(g, b, x, p, c, max_kl, metric=config.projection, q=q)
+        out = pcpo_step(g, b, x, p, c, max_kl, metric=config.projection, q=float(x @ hx), hx=hx,
+                        kl_dims=policy.kl_dims)
         return out.step_direction, out.nu, 0, {}

@@ -23,6 +23,7 @@ from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import BOOL, FRACTION, INT_GE_1, NON_NEGATIVE, POSITIVE, one_of, or_none, param
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "ssa")
+KL_CONVENTIONS = ("sum", "mean")
 
 
 @dataclasses.dataclass
@@ -41,11 +42,30 @@ class TrustRegionParams(OnPolicyParams):
     """target_kl is per action dimension (True) [O: its Normal's KL is averaged over the action's
     dimensions], so the bound on RLlib's KL, summed over them, is target_kl·act_dim (0.02 on the
     Point and Car tasks, 0.17 on Humanoid); False: target_kl bounds the summed KL itself [S
-    gaussian_kl sums over the dimensions]."""
+    gaussian_kl sums over the dimensions]. The step measures the KL kl_convention names (max_kl)."""
+    kl_convention: str = param("sum", accepts=one_of(KL_CONVENTIONS))
+    """The KL the step measures: the one whose Hessian the Fisher-vector product takes (so what
+    cg_damping weighs against), in q = xᵀHx, in the line search's KL ≤ δ and as kl_full_batch
+    reports it. "sum": RLlib's, summed over the action's dimensions [S gaussian_kl]; "mean":
+    averaged over them, OmniSafe's [O 0.5.0 natural_pg.py:95, trpo.py:113, cpo.py:133:
+    ``kl_divergence(p, q).mean()`` of a (B, act_dim) ``Normal``]. Its Hessian is act_dim times
+    smaller, so the same cg_damping weighs act_dim times more: [O]'s (H/d + 0.1·I) [O
+    natural_pg.py:119] is (H + 0.1·d·I)/d, i.e. the steps of damping 0.1·act_dim on the summed KL
+    (0.2 on the Point and Car tasks; x and q are then in other units, the steps the same, CG's ε
+    aside). With "mean", x = H⁻¹g, q and the TRPO, CPO and PCPO steps are [O]'s to rounding. δ is
+    per action dimension or not as kl_per_action_dim says, under either. The default keeps the
+    runs recorded with it; the ``omnisafe`` preset takes "mean"
+    (tests/algorithms/trpo_lag/test_trpo_lag_golden.py)."""
     cg_iters: int = param(15, accepts=INT_GE_1)
     """Conjugate-gradient iterations of each solve H·x = g [O cg_iters 15; S cg_iters 10]."""
     cg_damping: float = param(0.1, accepts=NON_NEGATIVE)
-    """Damping of the Fisher-vector product, (H + cg_damping·I)·v [O cg_damping 0.1; S damping_coeff 0.1]."""
+    """Damping of the Fisher-vector product, (H + cg_damping·I)·v, H the Hessian of the KL that
+    kl_convention names [O cg_damping 0.1 on its mean KL; S damping_coeff 0.1 on the summed KL]."""
+    cg_eps: float = param(0.0, accepts=NON_NEGATIVE)
+    """ε added to both denominators of conjugate gradient's recurrence, α = rᵀr/(pᵀHp + ε) and
+    β = r'ᵀr'/(rᵀr + ε) [O math.py:123, 129: 1e-6; S: 1e-8 in α only]. It biases the solve once rᵀr
+    nears it (on [O]'s KL, 1.4e-4 relative on xHx in the TRPO-Lag golden step), so the default is
+    Schulman's 0; the ``omnisafe`` preset takes [O]'s 1e-6."""
     backtrack_iters: int = param(15, accepts=INT_GE_1)
     """Fractions 1, c, c², … (c = backtrack_coeff) of the step the line search tries before it keeps
     θ_old [O trpo.py _search_step_size: 15; S backtrack_iters 10]."""
@@ -102,7 +122,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "safety_gym": {"num_envs_per_env_runner": 10},
     "mujoco": {"num_envs_per_env_runner": 5},
     "tiny": {**TINY_TRUST_REGION, "lagrangian_lr": 0.1},  # and PPO-Lag's faster ν
-    "omnisafe": {},
+    "omnisafe": {"kl_convention": "mean", "cg_eps": 1e-6},  # [O]'s KL, so its damping, and its CG
     # ν = softplus(p) from 1, Adam at 0.05 on this epoch's mean cost [S run_agent.py penalty_*].
     "ssa": {**SSA_TRUST_REGION, "nu_init": 1.0, "lagrangian_lr": 0.05, "nu_parametrization": "softplus"},
 }
@@ -124,8 +144,11 @@ class TRPOLagConfig(PPOLagConfig):
     LEARNER_CLASS = "lac_rllib.algorithms.trpo_lag.learner.TRPOLagTorchLearner"
 
     def max_kl(self, action_dim: int) -> float:
-        """δ on RLlib's KL (summed over the action's dimensions): target_kl·action_dim with
-        kl_per_action_dim [O], else target_kl [S]."""
+        """δ on the KL the step measures (kl_convention). On RLlib's, summed over the action's
+        dimensions: target_kl·action_dim with kl_per_action_dim [O], else target_kl [S]; on their
+        mean: target_kl [O], else target_kl/action_dim."""
+        if self.kl_convention == "mean":
+            return float(self.target_kl) / (1 if self.kl_per_action_dim else action_dim)
         return float(self.target_kl) * (action_dim if self.kl_per_action_dim else 1)
 
 

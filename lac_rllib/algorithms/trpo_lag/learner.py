@@ -15,7 +15,8 @@ the batch) and A = (A^R − ν·A^C)/(1 + ν) [O TRPOLag._compute_adv_surrogate]
     Δθ = √(2δ/xᵀHx)·x, then θ_old + c^j·Δθ for the first j whose KL̄ ≤ δ and L ≤ L(θ_old),
     θ_old if none is                                                          [O _search_step_size; S update_pi]
 
-δ = target_kl·act_dim with kl_per_action_dim (config.py). The critics then take their Adam
+δ = target_kl·act_dim with kl_per_action_dim (config.py); with kl_convention="mean" the KL is
+averaged over the action's dimensions [O] and δ = target_kl. The critics then take their Adam
 minibatch epochs in the same call (PPO-Lag's loop, fused or RLlib's), the policy's per-row loss
 there being nothing; there is no KL early stop. CPO and PCPO replace :meth:`policy_step`.
 """
@@ -65,11 +66,15 @@ class PolicyOnBatch:
     one (the env runners act with the weights of the last update). The ratio's denominator is the
     behaviour log-probability [O, S]."""
 
-    def __init__(self, module, whole: dict):
+    def __init__(self, module, whole: dict, kl_convention: str = "sum"):
         self.module, self.whole = module, whole
         self.params = [p for net in (module.encoder.actor_encoder, module.pi) for p in net.parameters()]
         self.mask = whole[Columns.LOSS_MASK]
         self.dist_cls = module.get_train_action_dist_cls()
+        shape = getattr(module.action_space, "shape", None)
+        self.action_dims = int(math.prod(shape)) if shape else 1
+        #: The action dimensions the step's KL sums over: all of them, or 1 for their mean (kl_convention).
+        self.kl_dims = self.action_dims if kl_convention == "sum" else 1
         with torch.no_grad():
             self.old = self.dist_cls.from_logits(module.action_dist_inputs(whole[Columns.OBS]))
 
@@ -82,14 +87,15 @@ class PolicyOnBatch:
         return masked_mean(torch.exp(logp - self.whole[Columns.ACTION_LOGP]) * advantages, self.mask)
 
     def mean_kl(self) -> torch.Tensor:
-        """KL̄ = mean KL(π_old ‖ π_θ) over the real rows, RLlib's KL (summed over action dimensions)."""
+        """KL̄ = mean KL(π_old ‖ π_θ) over the real rows: RLlib's KL (summed over action dimensions),
+        or its mean over them [O natural_pg.py:95] (kl_convention)."""
         new = self.dist_cls.from_logits(self.module.action_dist_inputs(self.whole[Columns.OBS]))
-        return masked_mean(self.old.kl(new), self.mask)
+        kl = self.old.kl(new)
+        return masked_mean(kl if self.kl_dims == self.action_dims else kl / self.action_dims, self.mask)
 
     def max_kl(self, config) -> float:
-        """δ on this KL (config.max_kl: per action dimension or summed)."""
-        shape = getattr(self.module.action_space, "shape", None)
-        return config.max_kl(int(math.prod(shape)) if shape else 1)
+        """δ on this KL (config.max_kl: per action dimension or summed, on the convention's KL)."""
+        return config.max_kl(self.action_dims)
 
 
 class TRPOLagTorchLearner(PPOLagTorchLearner):
@@ -125,7 +131,8 @@ class TRPOLagTorchLearner(PPOLagTorchLearner):
             if whole is None:
                 raise RuntimeError("the trust-region step needs the whole batch its learner connector's cost GAE keeps")
             module = self.module[module_id].unwrapped()
-            result, kl, loss = self.policy_step(module_id, config, module, PolicyOnBatch(module, whole))
+            policy = PolicyOnBatch(module, whole, config.kl_convention)
+            result, kl, loss = self.policy_step(module_id, config, module, policy)
             self.progress.setdefault(module_id, EpochProgress()).kl = kl  # reported as kl_full_batch
             self.step_loss[module_id] = torch.tensor(loss)
             self.metrics.log_dict({LINE_SEARCH_FRACTION: result.fraction, LINE_SEARCH_BACKTRACKS: result.backtracks},
@@ -144,7 +151,7 @@ class TRPOLagTorchLearner(PPOLagTorchLearner):
         loss_old = loss()
         g = -flat_grad(loss_old, policy.params)
         fvp = fisher_vector_product(policy.mean_kl, policy.params, config.cg_damping)
-        x = conjugate_gradient(fvp, g, config.cg_iters)
+        x = conjugate_gradient(fvp, g, config.cg_iters, eps=config.cg_eps)
         step = trpo_step(x, x @ fvp(x), max_kl)  # q = xᵀHx [O trpo.py; S agents.py]
         accept = trpo_acceptance(loss, policy.mean_kl, float(loss_old.detach()), max_kl)
         return self.search(policy, step, accept, config, loss)
