@@ -1,6 +1,6 @@
 """Record OmniSafe 0.5.0's own update step of PPO-Lag, FOCOPS, CUP and P3O on one seeded batch.
 
-Run with OmniSafe's venv (../shared/omnisafe-install.md), from the repository root:
+Run with OmniSafe's venv (benchmarks/golden/omnisafe_venv.sh; docs/golden.md), from the repository root:
 
     OMNISAFE_PY benchmarks/golden/omnisafe_first_order.py --algos ppo_lag,focops,cup,p3o
 

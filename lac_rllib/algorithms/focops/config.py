@@ -48,7 +48,7 @@ class FOCOPSParams(OnPolicyLagParams):
     "broadcast": OmniSafe 0.5.0's loss [O focops.py:103-107, ``(kl − r·A/λ_F)·1[kl ≤ η]`` with kl
     (B, 1) and r·A (B,), a B × B matrix, averaged]: mean_i(1_i·kl_i) − f·mean_j(r_j·A_j)/λ_F with f
     the fraction of rows inside η, so every row keeps its surrogate gradient, scaled by f. The
-    ``omnisafe`` preset takes "broadcast" (OmniSafe's step, tests/algorithms/test_golden.py)."""
+    ``omnisafe`` preset takes "broadcast" (OmniSafe's step, tests/algorithms/focops/test_focops_golden.py)."""
     nu_divides_advantage: bool = param(True, accepts=BOOL)
     """A = (A^R − ν·A^C)/(1 + ν) (True) [O FOCOPS._compute_adv_surrogate], or A^R − ν·A^C (False) [F
     focops_main.py], whose scale grows with ν."""
