@@ -26,7 +26,6 @@ Written to tests/fixtures/golden/focops-paper.npz (fixture.py)."""
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections import deque
 from pathlib import Path
@@ -39,7 +38,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fixture  # noqa: E402
 import reference_source  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
 REPO, COMMIT = "ymzhang01/focops", "fc92fcee1500d1b0dbe45a23c66188f22e463371"  # HEAD; its update = 7d3865e's
 FILES = ["focops_main.py", "models.py", "environment.py", "utils/__init__.py", "utils/math.py",
          "utils/pytorch.py", "utils/misc.py", "utils/logger.py", "utils/running_stats.py", "data_generator.py"]
@@ -154,12 +152,7 @@ def record(mirror: Path, commit: str, out_dir: Path) -> Path:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--mirror", type=Path, required=True, help=f"a bare git repository of {REPO}")
-    parser.add_argument("--commit", default=COMMIT)
-    parser.add_argument("--out", type=Path, default=ROOT / "tests" / "fixtures" / "golden")
-    args = parser.parse_args()
-    record(args.mirror, args.commit, args.out)
+    fixture.run_from_mirror(__doc__, REPO, COMMIT, record)
 
 
 if __name__ == "__main__":

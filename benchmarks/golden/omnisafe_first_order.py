@@ -17,8 +17,6 @@ Written to tests/fixtures/golden/<algo>-omnisafe.npz (benchmarks/golden/fixture.
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -30,7 +28,6 @@ from torch.distributions import Normal
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fixture  # noqa: E402  (the format, shared with the tests' loader)
 
-ROOT = Path(__file__).resolve().parents[2]
 OMNISAFE_NAMES = {"ppo_lag": "PPOLag", "focops": "FOCOPS", "cup": "CUP", "p3o": "P3O"}
 ROWS, HIDDEN, EP_COST, SEED = 64, [16, 16], 40.0, 0
 
@@ -154,17 +151,7 @@ def record(algo: str, out_dir: Path) -> Path:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algos", default=",".join(OMNISAFE_NAMES))
-    parser.add_argument("--out", type=Path, default=ROOT / "tests" / "fixtures" / "golden")
-    args = parser.parse_args()
-    algos = args.algos.split(",")
-    bad = [a for a in algos if a not in OMNISAFE_NAMES]
-    if bad:
-        parser.error(f"--algos {bad}: accepted {sorted(OMNISAFE_NAMES)}")
-    os.environ.setdefault("WANDB_MODE", "disabled")
-    for algo in algos:
-        record(algo, args.out)
+    fixture.run_for_algos(__doc__, OMNISAFE_NAMES, record)
 
 
 if __name__ == "__main__":

@@ -26,8 +26,6 @@ off 8 times. Written to tests/fixtures/golden/<algo>-omnisafe.npz (benchmarks/go
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -38,7 +36,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fixture  # noqa: E402  (the format, shared with the tests' loader)
 import omnisafe_first_order as first_order  # noqa: E402  (build, Recorder, make_batch)
 
-ROOT = Path(__file__).resolve().parents[2]
 OMNISAFE_NAMES = {"trpo_lag": "TRPOLag", "cpo": "CPO", "pcpo": "PCPO"}
 #: The module whose ``conjugate_gradients`` each class's ``_update_actor`` calls, and its line search.
 SOLVER_MODULE = {"trpo_lag": "omnisafe.algorithms.on_policy.base.trpo",
@@ -157,17 +154,7 @@ def record(algo: str, out_dir: Path) -> Path:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algos", default=",".join(OMNISAFE_NAMES))
-    parser.add_argument("--out", type=Path, default=ROOT / "tests" / "fixtures" / "golden")
-    args = parser.parse_args()
-    algos = args.algos.split(",")
-    bad = [a for a in algos if a not in OMNISAFE_NAMES]
-    if bad:
-        parser.error(f"--algos {bad}: accepted {sorted(OMNISAFE_NAMES)}")
-    os.environ.setdefault("WANDB_MODE", "disabled")
-    for algo in algos:
-        record(algo, args.out)
+    fixture.run_for_algos(__doc__, OMNISAFE_NAMES, record)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ Written to tests/fixtures/golden/respo-authors.npz (fixture.py)."""
 
 from __future__ import annotations
 
-import argparse
 import builtins
 import copy
 import inspect
@@ -40,7 +39,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fixture  # noqa: E402
 import reference_source  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
 REPO, COMMIT = "milanganai/milanganai.github.io", "7c194db2098d28dee7336c493e3471c14c0186fe"
 CODE = "NeurIPS2023/code"
 FILES = [f"{CODE}/respo.py", f"{CODE}/core_respo.py", f"{CODE}/utils/mpi_tools.py", f"{CODE}/utils/mpi_pytorch.py"]
@@ -185,12 +183,7 @@ def record(mirror: Path, commit: str, out_dir: Path) -> Path:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--mirror", type=Path, required=True, help=f"a bare git repository of {REPO}")
-    parser.add_argument("--commit", default=COMMIT)
-    parser.add_argument("--out", type=Path, default=ROOT / "tests" / "fixtures" / "golden")
-    args = parser.parse_args()
-    record(args.mirror, args.commit, args.out)
+    fixture.run_from_mirror(__doc__, REPO, COMMIT, record)
 
 
 if __name__ == "__main__":
