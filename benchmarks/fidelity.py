@@ -60,8 +60,9 @@ PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)
     "focops/HumanoidCircle-v0": ((925.03, 111.95), (49.57, 1.16)),
 }
 #: OmniSafe's figures (sweeps/published.yaml, cost limit 25) shown on a task whatever the variants
-#: run, by our algorithm names: each at the runs' budget where it has one there, else its final.
-OMNISAFE = {"SafetyPointGoal1-v0": ("sac_lag", "ppo_lag")}
+#: run, by the names the table prints (published.yaml's ``algorithms``): each at the runs' budget
+#: where it has one there, else its final.
+OMNISAFE = {"SafetyPointGoal1-v0": ("SAC-Lag", "PPO-L")}
 #: OmniSafe's unconstrained SAC (its off-policy table, 3e6 steps), shown beside them: (label, return, cost).
 UNCONSTRAINED_SAC = {"SafetyPointGoal1-v0": ("unconstrained SAC (OmniSafe), 3M steps", 27.04, 67.57)}
 #: OmniSafe's unconstrained on-policy rows (10M steps, its on-policy table), shown beside a run of
@@ -315,7 +316,8 @@ def final_table(df, task: str, order: list[str], compare_at: int | None = None,
     from sweeps.published import published
 
     pub = published()
-    always = published_figures(task, {}, always=OMNISAFE.get(task, ()))
+    names = {shown: algo for algo, shown in pub.algorithms.items()}
+    always = published_figures(task, {}, always=tuple(names[n] for n in OMNISAFE.get(task, ())))
     lines += [figure_row(name, f, common) for name, f in always]
     if task in UNCONSTRAINED_SAC:
         name, r, c = UNCONSTRAINED_SAC[task]

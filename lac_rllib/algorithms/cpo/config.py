@@ -62,12 +62,14 @@ class CPOParams(CostStepParams):
 
 #: [S] CPO as the paper ran it: TRPO-Lag's ssa values and c divided by the mean episode length.
 SSA = {**trpo_lag.SSA_TRUST_REGION, "cost_gap_scale": "episode_length"}
+#: [O]'s KL and CG (TRPO-Lag's ``omnisafe`` preset): what PCPO's ``omnisafe`` preset takes from here.
+OMNISAFE_STEP: dict[str, Any] = dict(trpo_lag.PRESETS["omnisafe"])
 PRESETS: dict[str, dict[str, Any]] = {
     "safety_gym": {"num_envs_per_env_runner": 10},  # [O] CPO.yaml is the defaults (speed only, as TRPO-Lag's)
     "mujoco": {"num_envs_per_env_runner": 5},
     "tiny": dict(trpo_lag.TINY_TRUST_REGION),  # [D] TRPO-Lag's tiny sizes
     # [O]'s own step: its KL (so its damping) and its dual (tests/algorithms/cpo/test_cpo_golden.py).
-    "omnisafe": {**trpo_lag.PRESETS["omnisafe"], "dual_convention": "omnisafe"},
+    "omnisafe": {**OMNISAFE_STEP, "dual_convention": "omnisafe"},
     "ssa": SSA,
 }
 

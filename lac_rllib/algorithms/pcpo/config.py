@@ -17,7 +17,6 @@ from typing import Any
 
 from lac_rllib.algorithms.cpo import config as cpo
 from lac_rllib.algorithms.cpo.config import CostStepParams, CPOConfig
-from lac_rllib.algorithms.trpo_lag import config as trpo_lag
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
 
@@ -52,7 +51,7 @@ class PCPOParams(CostStepParams):
 
 PRESETS: dict[str, dict[str, Any]] = {name: dict(values) for name, values in cpo.PRESETS.items() if name != "ssa"}
 # [O]'s KL and CG; PCPO has no dual to set (tests/algorithms/pcpo/test_pcpo_golden.py).
-PRESETS["omnisafe"] = dict(trpo_lag.PRESETS["omnisafe"])
+PRESETS["omnisafe"] = dict(cpo.OMNISAFE_STEP)
 
 #: PCPO's fields and what each accepts (lac_rllib/algorithms/registry.py).
 FIELDS = fields.FieldSet(PCPOParams, "PCPO")
