@@ -9,8 +9,14 @@ policy at the start of the update, which [O] snapshots as ``_p_dist``):
 
 r = π_θ(a|s)/π_old(a|s), A = (A^R − ν·A^C)/(1 + ν) [O] or A^R − ν·A^C [F], averaged over the real
 rows (a dropped row counts as 0, as [O]'s mean over the minibatch). Its gradient is the
-first-order step towards π* ∝ π_old·exp(A/λ_F) inside the trust region. The critics, ν's step
-(capped at ``nu_max``) and the epoch-level KL stop are PPO-Lag's.
+first-order step towards π* ∝ π_old·exp(A/λ_F) inside the trust region (``focops_indicator=
+"per_row"``, the ``paper`` preset). OmniSafe's loss, the default (``"broadcast"``), multiplies the
+(B, 1) indicator into the (B,) term [O focops.py:103-107]: its B × B mean keeps every row's
+surrogate gradient, scaled by the fraction f of rows inside η,
+
+    L = mean_i( 1_i·KL_i ) − f·mean_j( r_j·A_j )/λ_F.
+
+The critics, ν's step (capped at ``nu_max``) and the epoch-level KL stop are PPO-Lag's.
 """
 
 from __future__ import annotations

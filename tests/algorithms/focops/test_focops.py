@@ -34,7 +34,7 @@ def gaussian_kl(mean, log_std, ref_mean, ref_log_std):
 
 
 def test_the_loss_is_eq_11_and_drops_the_row_beyond_eta():
-    lrn = learner(focops_lam=1.5, focops_eta=0.02)
+    lrn = learner(focops_lam=1.5, focops_eta=0.02, focops_indicator="per_row")
     module = lrn.module[DEFAULT_MODULE_ID].unwrapped()
     config = lrn.config.get_config_for_module(DEFAULT_MODULE_ID)
     logits = torch.tensor([[0.10, -0.2], [0.00, 0.0], [0.30, 0.1], [-0.5, -0.3]], requires_grad=True)

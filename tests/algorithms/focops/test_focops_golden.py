@@ -1,8 +1,8 @@
 """FOCOPS against OmniSafe 0.5.0's own step (tests/fixtures/golden/README.md): with
-``focops_indicator="broadcast"`` (the ``omnisafe`` preset) every output is OmniSafe's within 1e-5
-relative, the multiplier's bounded Adam step, both critics and the actor's B × B-broadcast loss
-[O focops.py:103-107]; the paper's per-row loss (the default) takes another actor step on the same
-batch, and the test says where."""
+``focops_indicator="broadcast"`` (the default and the ``omnisafe`` preset) every output is
+OmniSafe's within 1e-5 relative, the multiplier's bounded Adam step, both critics and the actor's
+B × B-broadcast loss [O focops.py:103-107]; the paper's per-row loss (the ``paper`` preset's) takes
+another actor step on the same batch, and the test says where."""
 
 import numpy as np
 import pytest
@@ -31,7 +31,7 @@ def test_the_fixture_has_rows_on_both_sides_of_eta(fx):
     assert 0.05 < inside < 0.95, inside  # 8 of the 64 rows inside η
 
 
-@pytest.mark.parametrize("fields", [{"focops_indicator": "broadcast"}, {"preset": "omnisafe"}])
+@pytest.mark.parametrize("fields", [{}, {"focops_indicator": "broadcast"}, {"preset": "omnisafe"}])
 def test_the_broadcast_loss_is_omnisafes_step(fx, fields):
     assert_matches(on_policy_step(FOCOPSConfig, fx, **fields), fx.outputs)
 
