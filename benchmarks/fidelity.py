@@ -59,14 +59,14 @@ PAPER = {  # the paper's Table 1-2, LAC after 2.5M steps (docs/spec.md §7)
     "focops/HumanoidVelocity-v0": ((5023.27, 107.99), (20.12, 0.58)),
     "focops/HumanoidCircle-v0": ((925.03, 111.95), (49.57, 1.16)),
 }
-#: OmniSafe's figures (sweeps/published.yaml, cost limit 25) shown on a task whatever the variants
+#: OmniSafe's figures (sweeps/reports/published.yaml, cost limit 25) shown on a task whatever the variants
 #: run, by the names the table prints (published.yaml's ``algorithms``): each at the runs' budget
 #: where it has one there, else its final.
 OMNISAFE = {"SafetyPointGoal1-v0": ("SAC-Lag", "PPO-L")}
 #: OmniSafe's unconstrained SAC (its off-policy table, 3e6 steps), shown beside them: (label, return, cost).
 UNCONSTRAINED_SAC = {"SafetyPointGoal1-v0": ("unconstrained SAC (OmniSafe), 3M steps", 27.04, 67.57)}
 #: OmniSafe's unconstrained on-policy rows (10M steps, its on-policy table), shown beside a run of
-#: the Lagrangian algorithm named (as sweeps/published.yaml names it) with its multiplier pinned at 0.
+#: the Lagrangian algorithm named (as sweeps/reports/published.yaml names it) with its multiplier pinned at 0.
 UNCONSTRAINED = {"SafetyPointGoal1-v0": {"TRPO-L": ("unconstrained TRPO (OmniSafe), 10M steps", 27.20, 45.88),
                                          "PPO-L": ("unconstrained PPO (OmniSafe), 10M steps", 25.44, 55.72)}}
 CURVE_KEYS = ("env_steps", "episode_return", "episode_cost", "cost_limit", "nu", "nu_max",
@@ -230,10 +230,10 @@ def variant_algos(commands: list[str]) -> dict[str, tuple[str, bool]]:
 
 
 def figure_row(name: str, f, budget: int | None) -> str:
-    """A published figure (sweeps/published.py's Figure) as a table row named ``name``: beside runs
+    """A published figure (sweeps/reports/published.py's Figure) as a table row named ``name``: beside runs
     compared at ``budget`` env steps, its reading there (read from the source's curve, ± the
     reading's tolerance) where it has one, else its final figure, each named with its steps."""
-    from sweeps.table import steps_text
+    from sweeps.reports.table import steps_text
 
     r = f.at(budget)
     if r is None:
@@ -244,11 +244,11 @@ def figure_row(name: str, f, budget: int | None) -> str:
 
 
 def published_figures(task: str, variants: dict, shown=(), always: tuple[str, ...] = ()) -> list[tuple]:
-    """(row name, figure) of the published figures (sweeps/published.yaml: the paper's and OmniSafe's)
+    """(row name, figure) of the published figures (sweeps/reports/published.yaml: the paper's and OmniSafe's)
     of OmniSafe's ``always`` algorithms and of the algorithms the variants run (``variants``:
     :func:`variant_algos`), those whose name is not among ``shown``."""
     from lac_rllib.algorithms.registry import DEFAULT_ALGO
-    from sweeps.published import ROWS, published
+    from sweeps.reports.published import ROWS, published
 
     pub, out = published(), {}
     run = dict.fromkeys(a for a, pinned in variants.values() if a != DEFAULT_ALGO and not pinned)
@@ -264,7 +264,7 @@ def published_rows(task: str, variants: dict, shown: list[str], budget: int | No
     """Table rows (:func:`figure_row`, at ``budget``) of :func:`published_figures` of the algorithms
     the variants run, those not already ``shown`` (row labels, ``"OmniSafe PPO-L, 10M steps"``);
     OmniSafe's unconstrained row beside a variant that pins the multiplier at 0."""
-    from sweeps.published import published
+    from sweeps.reports.published import published
 
     pub = published()
     lines = [figure_row(name, f, budget) for name, f in
@@ -313,7 +313,7 @@ def final_table(df, task: str, order: list[str], compare_at: int | None = None,
     if task in PAPER:
         (r, rs), (c, cs) = PAPER[task]
         lines.append(f"| paper LAC, 2.5M steps | | {_fmt(r, rs)} | {_fmt(c, cs)} | | | |")
-    from sweeps.published import published
+    from sweeps.reports.published import published
 
     pub = published()
     names = {shown: algo for algo, shown in pub.algorithms.items()}
@@ -329,7 +329,7 @@ def final_table(df, task: str, order: list[str], compare_at: int | None = None,
     if images:
         lines += ["", "Read from a curve: the height of the source's mean curve at that budget in "
                   + ", ".join(f"[{Path(url).name}]({url})" for url in images)
-                  + " (sweeps/published.yaml), ± the reading's tolerance, not a std over seeds."]
+                  + " (sweeps/reports/published.yaml), ± the reading's tolerance, not a std over seeds."]
     if short:
         lines += ["", f"Not yet at {common:,} steps, so not in the table: {', '.join(short)}."]
     return "\n".join(lines), common

@@ -101,9 +101,9 @@ def _sub_envs(runner):
 
 def prefill_episodes(task: str, seed: int):
     """One iteration of random-action episodes at the preset (copied to fill the buffer)."""
-    from lac_rllib.algorithms.lac.config import build_config
+    from lac_rllib.algorithms.lac.config import LACConfig
 
-    config = build_config(task, seed, {"num_envs_per_env_runner": 1}, timesteps=10**9)
+    config = LACConfig.build(task, seed, {"num_envs_per_env_runner": 1}, timesteps=10**9)
     algo = config.build_algo()
     try:
         episodes = algo.env_runner.sample(num_timesteps=config.env_steps_per_iteration, random_actions=True)
@@ -155,11 +155,11 @@ def time_iteration(task: str, sets: dict, seed: int, prefill, env_config: dict |
     """Seconds per phase of one ``algo.train()`` with ``sets`` on top of the defaults, and
     ``chain floor``: the float32 matmul floor of the same chains (:func:`chain_matmul_floor_s`)."""
     import lac_rllib.algorithms.lac.module as module_mod
-    from lac_rllib.algorithms.lac.config import build_config
+    from lac_rllib.algorithms.lac.config import LACConfig
 
     episodes, runner_state, capacity, per_iteration = prefill
     sets = {"random_iterations": 0, "actor_update_start_iteration": 0, **sets}
-    config = build_config(task, seed, sets, timesteps=10**9)
+    config = LACConfig.build(task, seed, sets, timesteps=10**9)
     if env_config:
         config.environment(env_config={**config.env_config, **env_config})
     algo = config.build_algo()
@@ -211,10 +211,10 @@ def time_cpus(task: str, cpus: int, seed: int, prefill, iterations: int = 2, set
     runners' sample, remote on N > 1 CPUs, and the buffer's add), chain (the Langevin chains inside
     the learner, which is local), update (the rest of ``learner_group.update``), other (the rest)."""
     import lac_rllib.algorithms.lac.module as module_mod
-    from lac_rllib.algorithms.lac.config import build_config
+    from lac_rllib.algorithms.lac.config import LACConfig
 
     episodes, runner_state, capacity, per_iteration = prefill
-    config = build_config(task, seed, {"random_iterations": 0, "actor_update_start_iteration": 0, **(sets or {})},
+    config = LACConfig.build(task, seed, {"random_iterations": 0, "actor_update_start_iteration": 0, **(sets or {})},
                           timesteps=10**9, cpus=cpus)
     algo = config.build_algo()
     original_chain = module_mod.langevin_chain
@@ -434,7 +434,7 @@ def main(argv=None) -> int:
     args.tasks = args.tasks or list(DEFAULT_TASKS[:1] if args.against or args.serve else DEFAULT_TASKS)
     if args.serve:
         return _serve(args.serve, args.tasks[0], args.seed, args.steps)
-    from lac_rllib.algorithms.lac.config import parse_sets
+    from lac_rllib.algorithms.lac.config import FIELDS as LAC_FIELDS
     from lac_rllib.tasks import get_task
 
     variants = {"baseline": BASELINE, "current": {}}
@@ -445,7 +445,7 @@ def main(argv=None) -> int:
             get_task(task)
         for text in args.variant:
             name, _, pairs = text.partition(":")
-            variants[name] = parse_sets([p for p in pairs.split(",") if p])
+            variants[name] = LAC_FIELDS.parse_sets([p for p in pairs.split(",") if p])
         if args.update_paths:
             from lac_rllib.algorithms.registry import algo_config
 

@@ -27,7 +27,7 @@ def main() -> None:
 
     import ray
 
-    from lac_rllib.algorithms.lac.config import build_config
+    from lac_rllib.algorithms.lac.config import LACConfig
     from lac_rllib.train import train
     from sweeps import run as cli
     from sweeps.sweep import run_sweep
@@ -43,7 +43,7 @@ def main() -> None:
 
     start = time.perf_counter()
     for t in plan.trials:  # with the LAC fields the plan resolved for it, as its sweep trial runs
-        config = build_config(t.task, t.seed, t.params, timesteps=plan.timesteps)
+        config = LACConfig.build(t.task, t.seed, t.params, timesteps=plan.timesteps)
         train(config, plan.timesteps, str(tmp / "direct" / t.label()), log=lambda *x, **k: None)
     direct = time.perf_counter() - start
 

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import importlib
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 #: Public name -> the module that defines it.
 _EXPORTS = {
     "LAC": "lac_rllib.algorithms.lac.algorithm",
     "LACConfig": "lac_rllib.algorithms.lac.config",
     "LACParams": "lac_rllib.algorithms.lac.config",
-    "build_config": "lac_rllib.algorithms.lac.config",
     "LACTorchLearner": "lac_rllib.algorithms.lac.learner",
     "LACTorchRLModule": "lac_rllib.algorithms.lac.module",
     "ChainSettings": "lac_rllib.algorithms.lac.langevin",

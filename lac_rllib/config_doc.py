@@ -57,10 +57,10 @@ def _algo_section(algo: str, first: bool) -> list[str]:
 
     mod = algo_config(algo)
     params, fields, presets = mod.PARAMS, mod.FIELDS, mod.PRESETS
-    docs, defaults, cls = fields.docs(), fields.defaults, mod.CONFIG_CLASS.__name__
+    docs, defaults, cls = fields.docs(), fields.defaults, mod.__name__
     shared = {f.name for f in dataclasses.fields(SafeTaskParams)}
     out = ["", f"## {fields.what} (`algo={algo}`)", "",
-           f"`{params.__name__}` in `{mod.__name__.replace('.', '/')}.py`. Set a field with "
+           f"`{params.__name__}` in `{params.__module__.replace('.', '/')}.py`. Set a field with "
            f"`{cls}().training(name=value)`, `lac-train --algo {algo} --set name=value` or the sweep's "
            f"`--set name=value`"
            + (f" (with `--set algo={algo}` or `--space compare`)." if algo != DEFAULT_ALGO else ".")]
@@ -77,7 +77,7 @@ def _algo_section(algo: str, first: bool) -> list[str]:
         out += [f"| `{n}` | {_code(defaults[n])} | {_cell(fields.ranges[n].text)} | {_cell(docs.get(n, ''))} |"
                 for n in names]
     touched = [n for n in defaults if any(n in p for p in presets.values())]
-    family = mod.CONFIG_CLASS.TASK_FAMILY_OVERRIDES
+    family = mod.TASK_FAMILY_OVERRIDES
     family_text = "; ".join(f"{f} tasks: " + ", ".join(f"`{k}={v!r}`" for k, v in o.items()) for f, o in family.items())
     out += [
         "", f"### {fields.what} presets", "",

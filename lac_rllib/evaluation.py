@@ -13,7 +13,8 @@ this process, without ``ray.init``:
   ``MeanStdFilter`` (running mean/std + clip, docs/spec.md §5) is swapped for a frozen twin
   (``update_stats=False``) holding the same state, so evaluation never moves the statistics;
 * the task id and the LAC config fields from the checkpoint's ``rllib_checkpoint.json``,
-  which ``SafeAlgorithm.get_metadata`` fills (``checkpoint_format`` 3; format 2 is read too). The lac-rllib major.minor
+  which ``SafeAlgorithm.get_metadata`` fills (``checkpoint_format`` 4; formats 2 and 3 are read
+  too, where the version matches). The lac-rllib major.minor
   version and the format must match the installed ones;
 * its algorithm (``algo``): one of the registry's, or a user's own, imported again by the module
   path it ran under (from the Python path or the working directory: lac_rllib/algorithms/registry.py).
@@ -54,7 +55,7 @@ from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 #: The ``checkpoint_format`` this module reads (lac_rllib.constrained.algorithm writes it), and the
 #: older formats it still reads, each with the keys renamed since (old name → current name).
 SUPPORTED_CHECKPOINT_FORMAT = CHECKPOINT_FORMAT
-OLDER_FORMATS = {2: {"lac_config": "algo_config"}}
+OLDER_FORMATS = {2: {"lac_config": "algo_config"}, 3: {}}
 #: The modes every algorithm acts with (the others are their modules' own): its deterministic action
 #: (the mean), and a sample of its policy as the env runners drew them in training.
 GENERATOR, STOCHASTIC = "generator", "stochastic"
@@ -96,8 +97,8 @@ class Policy:
         """The action modes this policy can act with (the algorithm's ``ACTIONS``)."""
         from lac_rllib.algorithms.registry import actions
 
-        own = actions(self.algo)
-        return (*own[:1], *((STOCHASTIC,) if self.module_to_env is not None else ()), *own[1:])
+        # A draw from π needs the env runner's module-to-env pipeline (sample, unsquash, clip).
+        return tuple(mode for mode in actions(self.algo) if mode != STOCHASTIC or self.module_to_env is not None)
 
     @property
     def action_low(self) -> np.ndarray:

@@ -19,7 +19,7 @@ import sys
 import time
 
 from lac_rllib.algorithms import registry
-from lac_rllib.algorithms.lac.config import FIELD_NAMES, FIELD_RANGES, field_docs
+from lac_rllib.algorithms.lac.config import FIELDS as LAC_FIELDS
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
     ENV_STEPS,
@@ -47,7 +47,7 @@ RESOLVED = "resolved"
 def run_config(config) -> dict:
     """What ``config.json`` in a run's output holds (and what ``--resume`` compares)."""
     return json.loads(json.dumps({"task": config.task_id, "seed": config.seed,
-                                  registry.ALGO_FIELD: config.algo_class.ALGO, **config.params(),
+                                  registry.ALGO_FIELD: config.ALGO, **config.params(),
                                   RESOLVED: config.resolved()}, default=str))
 
 
@@ -193,11 +193,11 @@ def start_ray(num_cpus: int, attempts: int = 3) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    docs = field_docs()
+    docs = LAC_FIELDS.docs()
     parser = argparse.ArgumentParser(
         prog="lac-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="LAC fields for --set:\n" + "\n".join(
-            f"  {k}: {docs.get(k, '')} Accepted: {FIELD_RANGES[k].text}." for k in sorted(FIELD_NAMES))
+            f"  {k}: {docs.get(k, '')} Accepted: {LAC_FIELDS.ranges[k].text}." for k in sorted(LAC_FIELDS.names))
         + f"\n\nThe other algorithms' fields (--algo {registry.algos_text()}): docs/config.md.",
     )
     parser.add_argument("--algo", default=registry.DEFAULT_ALGO,

@@ -1,7 +1,7 @@
-"""Evaluate a trained LAC policy: from a checkpoint path, an MLflow trial run, or a sweep's best trial.
+"""Evaluate a trained policy: from a checkpoint path, an MLflow trial run, or a sweep's best trial.
 
     python sweeps/evaluate.py --checkpoint PATH [--episodes N] [--seed S]
-        [--actions generator|langevin] [--langevin-steps T] [--langevin-step-size ETA]
+        [--actions MODE] [--langevin-steps T] [--langevin-step-size ETA]
         [--video DIR] [--json]
     python sweeps/evaluate.py --run-id RUN_ID [--tracking-uri URI] ...
     python sweeps/evaluate.py --best-of SWEEP_RUN_ID [--tracking-uri URI] ...
@@ -12,11 +12,14 @@ Evaluate only checkpoints from a source you trust. Checkpoints from MLflow (``--
 run when it logged them (tag ``lac.checkpoint_sha256``) before anything is unpickled; a
 missing manifest or a mismatch stops with one line naming the file.
 
-Episode i is reset with seed S+i; equal seeds give identical results. ``generator`` acts with
-the actor's mean; ``langevin`` refines each action with Algorithm 1 (docs/spec.md §1) started from the
-target actor, with noise seeded from the seed. Prints return, cost, cost limit and the fraction
-of episodes within the limit (mean ± std over episodes); ``--json`` adds one JSON object as the
-last stdout line. Restoring needs no Ray cluster (nothing calls ray.init).
+Episode i is reset with seed S+i; equal seeds give identical results. ``--actions`` takes the
+modes the checkpoint's algorithm declares (its config's ``ACTIONS``), refused in one line naming
+them: ``generator`` acts with the actor's mean; ``stochastic`` draws from the policy as the env
+runners did in training (seeded per episode); ``langevin`` (LAC) refines each action with
+Algorithm 1 (docs/spec.md §1) started from the target actor, with noise seeded from the seed.
+Prints return, cost, cost limit and the fraction of episodes within the limit (mean ± std over
+episodes); ``--json`` adds one JSON object as the last stdout line. Restoring needs no Ray cluster
+(nothing calls ray.init).
 
 MLflow layout (the sweep service's): a trial is a run whose tag ``lac.checkpoint_artifact_path``
 names the artifact directory holding its RLlib checkpoint, with param ``task`` and metrics
@@ -80,8 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="MLflow tracking URI (default: the sweep service's, sqlite:///$PWD/mlflow.db)")
     p.add_argument("--episodes", type=int, default=10, help="episodes to run (>= 1; default 10)")
     p.add_argument("--seed", type=int, default=0, help="episode i is reset with seed+i (default 0)")
-    p.add_argument("--actions", choices=("generator", "langevin"), default="generator",
-                   help="generator: the actor's mean; langevin: Algorithm 1 from the target actor")
+    p.add_argument("--actions", default="generator", metavar="MODE",
+                   help="a mode the checkpoint's algorithm declares (its config's ACTIONS): generator, the "
+                        "policy's mean (every algorithm); stochastic, a draw from it as in training; langevin, "
+                        "LAC's Algorithm 1 from the target actor; a user algorithm's own")
     p.add_argument("--langevin-steps", type=int, default=None, metavar="T",
                    help="chain length T (default: the checkpoint's langevin_steps)")
     p.add_argument("--langevin-step-size", type=float, default=None, metavar="ETA",
@@ -101,8 +106,9 @@ def check_args(args: argparse.Namespace) -> None:
     if args.langevin_step_size is not None and not (
             math.isfinite(args.langevin_step_size) and args.langevin_step_size > 0):
         raise UsageError(f"--langevin-step-size {args.langevin_step_size} is invalid; accepted: a number > 0")
-    if args.actions != "langevin" and (args.langevin_steps is not None or args.langevin_step_size is not None):
-        raise UsageError("--langevin-steps/--langevin-step-size need --actions langevin")
+    if args.actions in ("generator", "stochastic") and (args.langevin_steps is not None
+                                                         or args.langevin_step_size is not None):
+        raise UsageError("--langevin-steps/--langevin-step-size need a chain mode (--actions langevin)")
     if args.tracking_uri and args.checkpoint:
         raise UsageError("--tracking-uri goes with --run-id or --best-of, not --checkpoint")
 
@@ -290,9 +296,9 @@ def main(argv: list[str] | None = None) -> int:
         try:
             resolved = resolve_checkpoint(args, workdir)
             policy = restore_policy(resolved.checkpoint)
-            if args.actions not in policy.actions:  # the chain needs LAC's critics and ν
-                raise UsageError(f"--actions {args.actions} is LAC's; {resolved.checkpoint} is a {policy.algo} "
-                                 f"checkpoint; accepted: --actions {' | '.join(policy.actions)}")
+            if args.actions not in policy.actions:  # the modes its algorithm declares (its config's ACTIONS)
+                raise UsageError(f"--actions {args.actions} is not a mode of {policy.algo} ({resolved.checkpoint}); "
+                                 f"accepted: --actions {' | '.join(policy.actions)}")
         except (UsageError, CheckpointError) as e:
             parser.exit(2, f"{PROG}: error: {e}\n")
         if resolved.task_param and resolved.task_param != policy.task_id:

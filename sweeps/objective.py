@@ -1,6 +1,6 @@
 """What a sweep ranks its trials by: the names a trial reports beside its row and the one scalar
 Tune, ASHA and Optuna read. A module of its own, so that running (sweeps/trainable.py,
-sweeps/sweep.py) and reading results (sweeps/results.py, the reports) import it and not each other.
+sweeps/sweep.py) and reading results (sweeps/reports/) import it and not each other.
 """
 
 from __future__ import annotations

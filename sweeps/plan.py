@@ -1,30 +1,30 @@
 """A sweep's plan: what will run, where it goes and what it costs, fixed before Ray starts.
 
-``sweeps/run.py`` makes it in one pass (file and flags → the resolved sweep → its trials → the
-estimate), prints it, and hands it whole to ``sweeps/sweep.py``, which reads nothing else;
-``sweep.yaml`` and ``sweep.json`` record it so that ``--resume`` can compare.
+``sweeps/run.py`` makes it in one pass (file and flags → the resolved sweep, sweeps/resolve.py →
+its trials → the estimate, sweeps/estimate.py), prints it, and hands it whole to
+``sweeps/sweep.py``, which reads nothing else; ``sweep.yaml`` and ``sweep.json`` record it so that
+``--resume`` can compare. A confirmation (``--confirm-top``) is planned here too, from the
+finished sweep's results.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
+from pathlib import Path
 
+from lac_rllib.algorithms.registry import DEFAULT_ALGO
+from sweeps import spaces, sweep_file
+from sweeps.estimate import estimate
+from sweeps.infra import Infra, check_optuna_study, default_optuna_storage
+from sweeps.record import SWEEP_FILE, parent_run_id
+from sweeps.resolve import trial_sets, user_algos
 from sweeps.spaces import TrialSpec
 from sweeps.sweep_file import SweepFile
 
-
-@dataclasses.dataclass(frozen=True)
-class Infra:
-    """Where a sweep runs and records (the command line's, not the sweep file's: they differ per machine)."""
-
-    address: str | None  #: the Ray cluster; None: a local Ray
-    address_from: str | None  #: "--address" or "RAY_ADDRESS" (what ``ray job submit`` sets)
-    tracking_uri: str
-    storage: str  #: as given (``Plan.storage`` is resolved)
-    resume: bool
-    max_failures: int
-    optuna_seed: int
-    optuna_storage: str | None = None  #: as given (None: beside the MLflow store)
+#: The most trials a sweep may plan unless --max-trials says more: counted before any is built
+#: (the plan holds each trial's resolved fields; ~10 ms and a few KB each).
+MAX_TRIALS = 5_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,20 +44,20 @@ class Plan:
     name: str  #: the sweep's name: its Tune directory under ``storage`` and its MLflow parent run
     storage: str
     optuna_storage: str | None  #: a search's Optuna storage URL
-    #: ``--confirm-top``: (K, seeds, budget) of the confirmation that follows the sweep (sweeps/confirm.py)
+    #: ``--confirm-top``: (K, seeds, budget) of the confirmation that follows the sweep (sweeps/reports/confirm.py)
     confirm: tuple | None = None
-    #: A confirmation sweep's winners (sweeps/confirm.py ``winners``): its report says whether each held up.
+    #: A confirmation sweep's winners (sweeps/reports/confirm.py ``winners``): its report says whether each held up.
     confirms: tuple | None = None
     #: A user's algorithm (its import path) → the folder its trials import it from (registry.module_dir).
     user_algos: dict = dataclasses.field(default_factory=dict)
     #: Each trial's estimated seconds (a search: the first configuration's, per trial): the wall
     #: time at another concurrency (a cluster's, known once connected) is made from them again.
     trial_seconds: tuple = ()
-    #: The evaluation blocks' share of the estimated time (sweeps/run.py ``estimate_eval_s``).
+    #: The evaluation blocks' share of the estimated time (sweeps/estimate.py ``estimate_eval_s``).
     eval_share: float = 0.0
     #: ``scheduler: asha``: (grace period in env steps, why, the rungs) (sweeps/scheduler.py); else None.
     early_stopping: tuple | None = None
-    #: (factor, what it came from): this machine's speed against the rates' (sweeps/calibration.py).
+    #: (factor, what it came from): this machine's speed against the rates' (sweeps/estimate.py).
     calibration: tuple = (1.0, "the rates as measured")
 
     @property
@@ -91,3 +91,142 @@ class Plan:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
         return out | {"tracking_uri": self.tracking_uri, "budget": self.budget, "seeds": list(self.seeds),
                       "trial_labels": [t.label() for t in self.trials] if self.trials else None}
+
+
+def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = (),
+               origin: sweep_file.Origin | None = None, max_trials: int = MAX_TRIALS) -> Plan:
+    """A resolved sweep's plan: its tasks (a user's env built and stepped once), its trials with
+    their fields resolved, the estimate, its name and storage. ``origin`` says where each key came
+    from (a file's line or a flag) for the errors; the trials are counted before any is built."""
+    origin = origin or sweep_file.Origin()
+    cpus = sweep.cpus_per_trial
+    if not infra.address and cpus > (os.cpu_count() or 1):
+        # Tune would keep such a trial PENDING forever on the local Ray this command starts.
+        raise ValueError(f"{origin(('cpus_per_trial',))} {cpus} is more than this machine's {os.cpu_count()} CPUs; "
+                         f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
+    tasks, user_tasks = resolve_tasks(sweep, search_dirs, origin)
+    seeds = sweep.seed_list()
+    count = sweep.num_samples * len(seeds) if sweep.is_search else spaces.count_trials(sweep, tasks)
+    if count > max_trials:
+        what = "num_samples × seeds" if sweep.is_search else "tasks × configurations × algorithms × seeds"
+        raise ValueError(f"{origin(('num_samples',) if sweep.is_search else ())}: the sweep plans {count:,} trials "
+                         f"({what}), more than --max-trials {max_trials:,}; accepted: a smaller sweep, or "
+                         "--max-trials N where a cluster can run them")
+    sets = trial_sets(sweep)
+    trials = None
+    if not sweep.is_search:
+        trials = spaces.resolve_trials(spaces.expand(sweep, tasks), sweep.budget, sets)
+    from lac_rllib.constrained.cpus import check_cpus
+
+    # A search is estimated at the fields it runs before Optuna's samples (the sampled T is not known yet).
+    first = trials or [dataclasses.replace(spaces.trial_spec(
+        {"task": tasks[0], "budget": sweep.budget, "sets": sets, "overrides": {}}), seed=0)]
+    for t in first:
+        check_cpus(t.params.get("num_envs_per_env_runner", 1), cpus, origin(("cpus_per_trial",)))
+    # search: each sampled configuration is trained with every seed (sweeps/sweep.py, SeedRepeater)
+    n_trials = len(trials) if trials is not None else sweep.num_samples * len(seeds)
+    concurrency = min(sweep.max_concurrent or max(1, (os.cpu_count() or 1) // cpus), n_trials)
+    figures = estimate(trials or first * n_trials, sweep, cpus, concurrency, infra.tracking_uri)
+    timesteps = max(t.timesteps for t in first)
+    if sweep.eval_modes:  # each mode must be one some algorithm of the sweep acts in
+        from lac_rllib.algorithms.registry import actions
+
+        accepted = ["generator", "stochastic", *dict.fromkeys(
+            m for a in dict.fromkeys(t.algo for t in trials or first) for m in actions(a))]
+        for i, mode in enumerate(sweep.eval_modes):
+            if mode not in accepted:
+                raise ValueError(f"{origin(('eval_modes', i))}: {mode!r}; accepted with this sweep's algorithms: "
+                                 f"{', '.join(dict.fromkeys(accepted))}")
+    early = None
+    if sweep.scheduler == "asha":  # per configuration, from the multipliers' warm-up (sweeps/scheduler.py)
+        from sweeps.scheduler import grace_period, milestones
+
+        grace, why = grace_period(trials or first, timesteps, sweep.grace_period)
+        early = (grace, why, tuple(milestones(grace, timesteps)))
+    name = sweep.name
+    optuna_storage = None
+    if sweep.is_search:
+        optuna_storage = infra.optuna_storage or default_optuna_storage(infra.tracking_uri, infra.storage)
+        check_optuna_study(optuna_storage, name, infra.resume)
+    return Plan(
+        sweep=sweep, infra=infra, space=space, tasks=tuple(tasks), user_tasks=user_tasks, trials=trials,
+        n_trials=n_trials, concurrency=concurrency, sets=sets, timesteps=timesteps, early_stopping=early,
+        estimated_wall_s=figures.wall_s, estimated_cpu_h=figures.cpu_h,
+        trial_seconds=figures.trial_seconds, eval_share=figures.eval_share, calibration=figures.calibration,
+        name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
+        user_algos=user_algos(sweep),
+    )
+
+
+def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), origin: sweep_file.Origin | None = None
+                  ) -> tuple[list[str], dict]:
+    """The sweep's task ids, every one known here; a user's env is built once and stepped first
+    (lac_rllib/tasks/user.py), its definition returned to travel with the trials."""
+    from lac_rllib.tasks import get_task
+    from lac_rllib.tasks.user import definition, user_task
+
+    origin = origin or sweep_file.Origin()
+    ids, user = [], {}
+    for i, task in enumerate(sweep.task):
+        if isinstance(task, str):
+            try:
+                get_task(task)  # unknown id -> ValueError naming the closest known ones
+            except ValueError as e:
+                raise ValueError(f"{origin(('task', i))}: {e}") from None
+            ids.append(task)
+            continue
+        try:
+            spec = user_task(task.task_id(), factory=task.factory, gym_id=task.id, cost_limit=task.cost_limit,
+                             episode_cost_discount=task.episode_cost_discount, cost_key=task.cost_key,
+                             preset=task.preset, kwargs=task.kwargs, search_dirs=search_dirs)
+        except ValueError as e:
+            raise ValueError(f"{origin(('task', i))}: {e}") from None
+        ids.append(spec.id)
+        user[spec.id] = definition(spec)
+    return ids, user
+
+
+def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | None) -> tuple[int, int, str | int]:
+    """``--confirm-top K [--confirm-seeds N] [--confirm-budget B]`` checked before Ray starts: one
+    task, a budget at least the sweep's (a smaller one would confirm something else). Returns the
+    plan's ``confirm``: (K, seeds, budget), the defaults filled in."""
+    if len(plan.tasks) != 1:
+        raise ValueError(f"--confirm-top with {len(plan.tasks)} tasks: a confirmation reruns one task's winners; "
+                         "accepted: a sweep of one task")
+    budget = budget if budget is not None else plan.sweep.budget
+    steps = spaces.get_budget(budget).for_task(plan.tasks[0])[0]
+    if steps < plan.timesteps:
+        raise ValueError(f"--confirm-budget {budget}: {steps:,} env steps is less than the sweep's {plan.timesteps:,}; "
+                         "accepted: the same or a larger budget")
+    return top, seeds or max(len(plan.seeds), 3), budget
+
+
+def confirmation_plan(plan: Plan, sweep_dir: Path) -> Plan | None:
+    """``--confirm-top``: the plan of the confirmation that follows the finished sweep ``plan``: its
+    K best feasible configurations (read back from MLflow, ranked by the lower end of their return
+    interval) beside the default and the baselines the sweep ran, on fresh seeds, as the sweep
+    NAME-confirm (sweeps/reports/confirm.py). None: no feasible configuration but the default."""
+    from sweeps.reports import confirm
+    from sweeps.reports.report import summarize
+    from sweeps.reports.results import sweep_results
+    from sweeps.tracking import SweepTracker
+
+    k, seeds, budget = plan.confirm
+    fields = confirm.varied_fields(plan.sweep)
+    tracker = SweepTracker(plan.tracking_uri, plan.experiment)
+    trials, _ = sweep_results(tracker, parent_run_id(sweep_dir), tuple(fields))
+    fields_of = {r["config"]: {f: r[f] for f in fields if f in r and not _missing(r[f])}
+                 for r in trials.to_dict("records")}
+    top = confirm.winners(summarize(trials), fields_of, k) if len(trials) else []
+    if not top:
+        return None
+    name = f"{plan.name}-confirm"
+    # The baselines the sweep ran (besides its own algorithm) rerun at their defaults beside the winners.
+    baselines = tuple(a for a in dict.fromkeys(trials["algo"]) if a not in plan.sweep.algo and a != DEFAULT_ALGO)
+    cfile = confirm.confirmation_file(plan.sweep, top, seeds, budget, name, baselines)
+    infra = dataclasses.replace(plan.infra, resume=(Path(plan.storage) / name / SWEEP_FILE).exists())
+    return dataclasses.replace(plan_sweep(cfile, "confirm", infra), confirms=tuple(top))
+
+
+def _missing(v) -> bool:
+    return v is None or (isinstance(v, float) and v != v)

@@ -2,7 +2,7 @@
 reruns it) and ``sweep.json`` (its parent run and plan), so ``--resume`` continues the same sweep
 and refuses another one.
 
-Kept apart from ``sweeps/sweep.py`` so the CLI can judge a resume before Ray is imported.
+Kept apart from ``sweeps/sweep.py`` so the CLI can judge a start or a resume before Ray is imported.
 """
 
 from __future__ import annotations
@@ -54,3 +54,30 @@ def resume_differences(sweep_dir: Path, plan) -> list[str]:
     diff += [f"--{k.replace('_', '-')}={old_infra[k]!r} (now {getattr(plan.infra, k)!r})"
              for k in IDENTITY_INFRA if k in old_infra and old_infra[k] != getattr(plan.infra, k)]
     return diff
+
+
+def parent_run_id(sweep_dir: Path) -> str:
+    """The MLflow parent run of the sweep recorded in ``sweep_dir``."""
+    return json.loads((sweep_dir / SWEEP_FILE).read_text())["parent_run_id"]
+
+
+def checked_sweep_dir(plan) -> Path:
+    """The sweep's Tune directory (``--storage``/NAME), checked before Ray starts: a new sweep's is
+    free (or holds a start that failed early), a resumed one's records the same sweep."""
+    sweep_dir = Path(plan.storage) / plan.name
+    resume = plan.infra.resume
+    if sweep_dir.resolve().parent != Path(plan.storage).resolve():  # a safe name cannot; a link might
+        raise ValueError(f"sweep {plan.name!r}: its directory {sweep_dir} resolves outside --storage "
+                         f"{plan.storage}; accepted: a name whose directory lies in --storage")
+    if resume and not (sweep_dir / SWEEP_FILE).exists():
+        raise ValueError(f"--resume: no sweep named {plan.name!r} under {plan.storage}")
+    if resume:
+        diff = resume_differences(sweep_dir, plan)
+        if diff:
+            raise ValueError(f"--resume: sweep {plan.name!r} was started with other settings: "
+                             f"{'; '.join(diff)}. Resume with the original ones, or start a new --name")
+    # A directory without a record or Tune state is a start that failed early: startable.
+    started = (sweep_dir / SWEEP_FILE).exists() or any(sweep_dir.glob("experiment_state*.json"))
+    if not resume and started:
+        raise ValueError(f"a sweep named {plan.name!r} exists under {plan.storage}; pass --resume or --name")
+    return sweep_dir

@@ -166,7 +166,7 @@ def trial_spec(config: dict) -> TrialSpec:
 def groups_for(sweep, preset: str) -> dict:
     """The sweep file's groups for a task of ``preset`` at the sweep's budget: the first matching
     ``groups_at``, else ``groups``, else its ``grid`` as one group, else one configuration (a
-    resolved sweep always has ``groups``: sweeps/run.py names a file's one group after the file)."""
+    resolved sweep always has ``groups``: sweeps/resolve.py names a file's one group after the file)."""
     from sweeps.sweep_file import Group
 
     for at in sweep.groups_at:
@@ -179,7 +179,7 @@ def groups_for(sweep, preset: str) -> dict:
 
 def count_trials(sweep, task_ids: list[str]) -> int:
     """How many trials :func:`expand` would build, counted without building them (a sweep file
-    can ask for more than memory holds: sweeps/run.py refuses it first)."""
+    can ask for more than memory holds: sweeps/plan.py refuses it first)."""
     import math
 
     from lac_rllib.tasks import get_task

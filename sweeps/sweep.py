@@ -8,6 +8,7 @@ import math
 import os
 import platform
 import signal
+import subprocess
 import sys
 import threading
 from pathlib import Path
@@ -21,11 +22,12 @@ from ray.tune.search.optuna import OptunaSearch
 from lac_rllib.constrained.cpus import run_resources
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN
 from sweeps import spaces
+from sweeps.estimate import duration_text, estimate_wall_s
 from sweeps.live_table import LiveTable
 from sweeps.objective import CONSTRAINT, OBJECTIVE, objective
 from sweeps.plan import Plan
 from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
-from sweeps.results import close_sweep
+from sweeps.reports.results import close_sweep
 from sweeps.scheduler import ConfigurationASHA
 from sweeps.score import SCORE_COST, SCORE_RETURN, SCORES
 from sweeps.tracking import (
@@ -101,6 +103,15 @@ class SeedRepeater(Repeater):
             "n_seeds": len(seeds)})
 
 
+def git_commit() -> str:
+    """The commit of the code that runs the sweep (its parent run's ``git_commit``)."""
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
+                              cwd=Path(__file__).parent).stdout.strip() or "unknown"
+    except OSError:
+        return "unknown"
+
+
 def versions() -> dict:
     import mlflow
     import torch
@@ -143,12 +154,10 @@ def at_cluster_concurrency(plan: Plan, cpus: int) -> Plan:
     """The plan at the concurrency a cluster of ``cpus`` CPUs gives (the plan, made before Ray
     connected, counted this machine's), its wall time estimated again from its trials' seconds;
     printed, as the plan's own lines were."""
-    from sweeps.run import estimate_wall_s
-
     concurrency = min(plan.n_trials, max(1, cpus // plan.sweep.cpus_per_trial))
     wall = estimate_wall_s(list(plan.trial_seconds), concurrency) if plan.trial_seconds else plan.estimated_wall_s
     plan = dataclasses.replace(plan, concurrency=concurrency, estimated_wall_s=wall)
-    print(f"  cluster: {cpus} CPUs -> {concurrency} trials at once; estimated wall time ~{wall / 60:.0f} min, "
+    print(f"  cluster: {cpus} CPUs -> {concurrency} trials at once; estimated wall time {duration_text(wall)}, "
           f"{plan.estimated_cpu_h:.1f} CPU-hours", flush=True)
     return plan
 
@@ -290,7 +299,7 @@ def search_algorithm(plan: Plan) -> SeedRepeater | None:
     # optuna-dashboard opens it, and a resumed sweep goes on with the same study. TPE reads
     # the constraint each configuration is told (ConstrainedOptunaSearch); random ignores it.
     # A multi-objective search (motpe, nsga2) has two: return up, cost down; its result is the
-    # study's Pareto set (sweeps/report.py, pareto.json), the constraint marking the feasible part.
+    # study's Pareto set (sweeps/reports/report.py, pareto.json), the constraint marking the feasible part.
     sampler = {"tpe": optuna.samplers.TPESampler, "motpe": optuna.samplers.TPESampler,
                "random": optuna.samplers.RandomSampler, "nsga2": PicklableNSGAIISampler}[sweep.searcher]
     metric, mode = ((list(MULTI_OBJECTIVES), ["max", "min"]) if sweep.multi_objective else (METRIC, MODE))

@@ -32,6 +32,7 @@ CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
 ERROR_TAG = "lac.error"  # the last error of a failed attempt (cleared when a retry starts)
 STATUS_TAG = "lac.sweep_status"  # on the parent run: finished | interrupted
 STOPPED_TAG = "lac.stopped_early"  # on a child run the scheduler (ASHA) stopped before its budget
+CONFIRMED_BY_TAG = "lac.confirmed_by"  # on a parent run: the name of the sweep that confirmed it
 # A child run's params besides every LAC field (written by sweeps/trainable.py, read by the report).
 P_TASK, P_SEED, P_GROUP, P_TIMESTEPS = "task", "seed", "group", "timesteps"
 P_TASK_SOURCE = "task_source"  # what builds the task's env: a factory ("module:function") or a gymnasium id
@@ -125,6 +126,15 @@ def learning_curve(client, run_id: str, cost_limit: float):
 def _params(d: dict) -> list[Param]:
     """MLflow params are strings (≤ 6000 chars); JSON keeps tuples and None readable."""
     return [Param(k, (v if isinstance(v, str) else json.dumps(v, default=str))[:6000]) for k, v in d.items()]
+
+
+def param_value(text: str):
+    """A logged param as its value: JSON for numbers and None, the text itself for a string
+    (:func:`_params` logs strings as they are, e.g. a swept ``algo``)."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
 
 
 def _transient(e: Exception) -> bool:

@@ -194,7 +194,7 @@ class SweepTrial(tune.Trainable):
         """Final checkpoint, evaluation block and learning curve as artifacts, the trial's declared
         score (sweeps/score.py: the sweep's ``score``) and its train score logged, the score used
         tagged, then the MLflow run closed; returns the declared score."""
-        from sweeps.report import trial_curve
+        from sweeps.reports.report import trial_curve
 
         with tempfile.TemporaryDirectory() as tmp:
             self.algo.save_to_path(os.path.join(tmp, "checkpoint"))

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("RAY_DEDUP_LOGS", "0")
-# Plans estimate at the rates as measured, whatever machine runs the tests (sweeps/calibration.py;
-# tests/sweeps/test_calibration.py turns it on where it is the subject).
+# Plans estimate at the rates as measured, whatever machine runs the tests (sweeps/estimate.py;
+# tests/sweeps/test_estimate.py turns it on where it is the subject).
 os.environ.setdefault("LAC_SWEEP_CALIBRATION", "off")
 
 
@@ -122,11 +122,11 @@ def train_batch(algo) -> dict:
 @pytest.fixture(scope="session")
 def checkpoint(ray_session, tmp_path_factory):
     """One tiny PointHazard checkpoint per session (lac-train's layout), for restore/evaluation tests."""
-    from lac_rllib.algorithms.lac.config import build_config
+    from lac_rllib.algorithms.lac.config import LACConfig
     from lac_rllib.train import train
 
     out = tmp_path_factory.getbasetemp() / "lac_eval_tiny"
-    config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+    config = LACConfig.build("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
                                                      "random_iterations": 1}, timesteps=1500)
     train(config, 1500, str(out), log=lambda *a, **k: None)
     return str(out / "checkpoint")

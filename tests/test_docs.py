@@ -143,7 +143,7 @@ def test_every_repository_path_named_exists():
 # few ("plan.py, record.py, lock.py"; a folder ends in "/") and what they hold.
 ARCHITECTURE = DOCS / "architecture.md"
 TREE_LINE = re.compile(r"^( *)((?:[\w.-]+/?, )*[\w.-]+/?)(?:\s+\S.*)?$")
-PACKAGES = ("lac_rllib", "sweeps")
+PACKAGES = ("lac_rllib", "sweeps", "benchmarks")
 # What the page names in backticks: `lac_rllib/constrained/cpus.py`, `tasks/`, `lac_rllib.constrained`.
 BACKTICKED = re.compile(r"`([^`\s]+)`")
 TOP_FOLDERS = ("lac_rllib/", "sweeps/", "tests/", "benchmarks/", "docs/", "docker/")
@@ -197,8 +197,9 @@ def test_architecture_names_only_paths_that_exist():
 
 
 def test_architecture_names_every_module():
-    """Every module of lac_rllib/ and sweeps/ is a line of the folder tree (an __init__.py may be
-    named by its folder), so a new module comes with its line."""
+    """Every module of lac_rllib/, sweeps/ and benchmarks/ is a line of the folder tree (an
+    __init__.py may be named by its folder), so a new module comes with its line; the other way,
+    test_architecture_names_only_paths_that_exist."""
     tree = set(architecture_tree())
     modules = sorted(rel(p) for d in PACKAGES for p in (ROOT / d).rglob("*.py") if "__pycache__" not in p.parts)
     missing = [m for m in modules if m not in tree and not (m.endswith("/__init__.py") and m.rsplit("/", 1)[0] in tree)]

@@ -86,15 +86,17 @@ ALGO_DIR = ROOT / "lac_rllib" / "algorithms"
 
 
 def test_no_algorithm_folder_imports_another_but_its_house():
-    """What two algorithms share lives in lac_rllib/constrained/ (networks, multiplier, plumbing);
-    an algorithm built on another's house (its algorithm class extends the other's: the first-order
-    baselines on PPO-Lag's, registry.house) imports that folder and no other."""
+    """What two algorithms share lives in lac_rllib/constrained/ (the on-policy, trust-region and
+    off-policy bases, the multiplier, plumbing); an algorithm built on another (its config class
+    extends the other's: FOCOPS, CUP, RESPO on PPO-Lag, PCPO on CPO; registry.house) imports that
+    folder and no other: a folder importing another's learner that is not its declared base fails."""
     from lac_rllib.algorithms.registry import ALGOS, house
 
     folders = sorted(p.name for p in ALGO_DIR.iterdir() if (p / "__init__.py").exists())
     assert set(ALGOS) <= set(folders)
     houses = {name: house(name) for name in folders if name in ALGOS}
-    assert {houses[a] for a in ("focops", "cup", "p3o", "respo")} == {"ppo_lag"} and houses["sac_lag"] is None
+    assert {houses[a] for a in ("focops", "cup", "respo")} == {"ppo_lag"} and houses["pcpo"] == "cpo"
+    assert all(houses[a] is None for a in ("lac", "ppo_lag", "sac_lag", "p3o", "trpo_lag", "cpo"))
     crossing = [f"{path.relative_to(ROOT)} imports {m}"
                 for name in folders for path in sorted((ALGO_DIR / name).rglob("*.py"))
                 for m in _imports(path)
@@ -130,18 +132,93 @@ def test_no_module_outside_the_algorithm_folders_names_an_algorithm():
 
 
 def test_reporting_and_running_do_not_import_each_other():
-    """Results and reports read what trials report (sweeps/objective.py) and how configurations are
-    written (sweeps/configurations.py), never the runner's modules; no module borrows another's
-    private names."""
+    """The reports (sweeps/reports/) read what trials report (sweeps/objective.py) and how
+    configurations are written (sweeps/reports/configurations.py), never the runner's modules; no
+    module borrows another's private names."""
     import ast
 
-    reading = ("results", "report", "safety", "importance", "frontier", "chain_health", "confirm", "configurations")
     bad = []
-    for path in sorted((ROOT / "sweeps").glob("*.py")):
+    for path in sorted((ROOT / "sweeps").rglob("*.py")):
+        reading = path.parent.name == "reports"
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if not (isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sweeps")):
                 continue
             bad += [f"{path.name} imports {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
-            if path.stem in reading and node.module in ("sweeps.sweep", "sweeps.trainable"):
+            if reading and node.module in ("sweeps.sweep", "sweeps.trainable", "sweeps.run"):
                 bad.append(f"{path.name} imports {node.module}")
     assert not bad, bad
+
+
+#: The repository's Python, by folder: its modules and how they import one another.
+LAYERS = ("lac_rllib", "sweeps", "benchmarks")
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Module → the repository's modules it imports (top level or inside functions). A benchmark
+    imports a sibling by its bare name (its folder is on sys.path), so a bare name that is a
+    module of the importer's own folder counts as that module."""
+    import ast
+
+    modules = {".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): p
+               for d in LAYERS for p in (ROOT / d).rglob("*.py") if "__pycache__" not in p.parts}
+    graph = {}
+    for m, p in modules.items():
+        folder = m.rsplit(".", 1)[0] if p.name != "__init__.py" else m
+        names = set()
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                # from PACKAGE import SUBMODULE is the submodule; from MODULE import NAME the module
+                names.update(f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in modules else node.module
+                             for a in node.names)
+            elif isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+        deps = set()
+        for n in names:
+            if m.startswith("benchmarks") and f"{folder}.{n}" in modules:
+                n = f"{folder}.{n}"
+            while n and n not in modules:  # a name inside a module: the module
+                n = n.rpartition(".")[0]
+            if n and n != m:
+                deps.add(n)
+        graph[m] = deps
+    return graph
+
+
+def import_circle(graph: dict[str, set[str]]) -> list[str] | None:
+    """The first import circle of ``graph`` (depth first, in name order), or None."""
+    done, path = set(), []
+
+    def visit(m):  # a module met again on the current path closes a circle
+        if m in path:
+            return path[path.index(m):] + [m]
+        if m in done:
+            return None
+        path.append(m)
+        for n in sorted(graph[m]):
+            if circle := visit(n):
+                return circle
+        path.pop()
+        done.add(m)
+        return None
+
+    return next((c for m in sorted(graph) if (c := visit(m))), None)
+
+
+def test_no_import_circle_in_the_repository():
+    """No circle among the modules of lac_rllib/, sweeps/ and benchmarks/, imports inside functions
+    included; the sweep CLI (sweeps/run.py) imports the rest of sweeps/ and none of them imports it."""
+    graph = module_graph()
+    assert {"lac_rllib.constrained.on_policy_learner", "sweeps.run", "benchmarks.revision"} <= set(graph)
+    assert "benchmarks.revision" in graph["benchmarks.update_step"]  # bare sibling imports are followed
+    circle = import_circle(graph)
+    assert circle is None, "import circle: " + " -> ".join(circle)
+    assert not [m for m, deps in graph.items() if "sweeps.run" in deps and m.startswith("sweeps")]
+
+
+def test_the_circle_check_finds_a_circle():
+    """It can fail: a circle put into a copy of the graph is found and named."""
+    graph = module_graph()
+    plan = sorted(graph["sweeps.run"])[0]  # run imports it: an import back closes a circle
+    graph[plan] = graph[plan] | {"sweeps.run"}
+    circle = import_circle(graph)
+    assert circle is not None and circle[0] == circle[-1] and {"sweeps.run", plan} <= set(circle)

@@ -7,7 +7,7 @@ import sys
 import pytest
 
 import lac_rllib
-from lac_rllib.algorithms.lac.config import build_config
+from lac_rllib.algorithms.lac.config import LACConfig
 from lac_rllib.algorithms.registry import algos_text
 from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 from lac_rllib.constrained.metrics import LANGEVIN_AT_BOUND
@@ -54,7 +54,7 @@ class _Stop(Exception):
 @pytest.mark.slow
 def test_a_stopped_run_resumes_from_its_last_checkpoint(ray_session, tmp_path):
     out = str(tmp_path / "run")
-    config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+    config = LACConfig.build("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
                                                      "random_iterations": 1}, timesteps=2500)
 
     def stop_at_iteration_4(line, **_):
@@ -77,7 +77,7 @@ def test_resuming_a_finished_run_says_so_and_returns_its_summary(ray_session, tm
     """--resume of a run that already reached --timesteps trains nothing: it says the run is
     finished and returns the summary the run ended with (its last row, its checkpoint)."""
     out = str(tmp_path / "run")
-    config = build_config("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+    config = LACConfig.build("lac/PointHazard-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
                                                      "random_iterations": 1}, timesteps=1000)
     first = train(config, 1000, out, log=lambda *a, **k: None)
     progress = (tmp_path / "run" / PROGRESS).read_text()
@@ -100,36 +100,37 @@ def test_resuming_a_finished_run_says_so_and_returns_its_summary(ray_session, tm
 def test_resume_may_change_speed_fields_only(tmp_path):
     """A run started with other speed-only values resumes; a change of what is learned is refused,
     naming the field."""
-    config = build_config("lac/PointHazard-v0", 0, {}, timesteps=1000)
+    config = LACConfig.build("lac/PointHazard-v0", 0, {}, timesteps=1000)
     started = {**run_config(config), "langevin_fused": False, "num_envs_per_env_runner": 2, "torch_threads": 2}
     (tmp_path / CONFIG).write_text(json.dumps(started))
     _fake_checkpoint(tmp_path, config)  # what SafeAlgorithm writes
-    check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 4}, timesteps=1000),
-                 resume=True)
+    check_output(str(tmp_path),
+                 LACConfig.build("lac/PointHazard-v0", 0, {"num_envs_per_env_runner": 4}, timesteps=1000), resume=True)
     with pytest.raises(ValueError, match=r"started with other settings: beta=0.0 \(now 0.5\)$"):
-        check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"beta": 0.5}, timesteps=1000), resume=True)
+        check_output(str(tmp_path), LACConfig.build("lac/PointHazard-v0", 0, {"beta": 0.5}, timesteps=1000),
+                     resume=True)
 
 
 def test_resume_may_raise_the_budget_only_where_the_lr_horizon_stays(tmp_path):
     """A run with its own lr horizon (the presets' 2.5M) is carried on to a larger budget; a run
     whose horizon is its budget is not, since a new budget would change its learning rates."""
-    config = build_config("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=1000)
+    config = LACConfig.build("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=1000)
     (tmp_path / CONFIG).write_text(json.dumps(run_config(config)))
     _fake_checkpoint(tmp_path, config)
-    check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=4000),
+    check_output(str(tmp_path), LACConfig.build("lac/PointHazard-v0", 0, {"lr_decay_horizon": 5000}, timesteps=4000),
                  resume=True)
-    own = build_config("lac/PointHazard-v0", 0, {}, timesteps=1000)
-    assert own.lac_params()["lr_decay_horizon"] is None  # the tiny preset decays over the run's budget
+    own = LACConfig.build("lac/PointHazard-v0", 0, {}, timesteps=1000)
+    assert own.params()["lr_decay_horizon"] is None  # the tiny preset decays over the run's budget
     (tmp_path / CONFIG).write_text(json.dumps(run_config(own)))
     with pytest.raises(ValueError, match=r"total_env_steps=1000 \(now 4000\)"):
-        check_output(str(tmp_path), build_config("lac/PointHazard-v0", 0, {}, timesteps=4000), resume=True)
+        check_output(str(tmp_path), LACConfig.build("lac/PointHazard-v0", 0, {}, timesteps=4000), resume=True)
 
 
 def _fake_checkpoint(path, config):
     (path / "checkpoint").mkdir()
     (path / "checkpoint" / "rllib_checkpoint.json").write_text(json.dumps({
         "lac_rllib_version": lac_rllib.__version__, "checkpoint_format": CHECKPOINT_FORMAT, "task_id": config.task_id,
-        "algo_config": config.lac_params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
+        "algo_config": config.params(), "cost_limit": 2.0, "episode_cost_discount": 1.0}, default=str))
 
 
 def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path, monkeypatch):
@@ -139,7 +140,7 @@ def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path,
     import lac_rllib.constrained.precision as precision
 
     monkeypatch.setattr(precision, "cpu_flags", lambda: {"avx2", "avx512_bf16"})
-    config = build_config("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
+    config = LACConfig.build("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
     started = run_config(config)
     assert started["langevin_dtype"] == "auto" and started["resolved"] == {"langevin_dtype": "bfloat16"}
     (tmp_path / CONFIG).write_text(json.dumps(started))
@@ -147,7 +148,7 @@ def test_config_json_records_what_auto_resolved_to_and_resume_holds_it(tmp_path,
     check_output(str(tmp_path), config, resume=True)  # same machine kind: resumes
 
     monkeypatch.setattr(precision, "cpu_flags", lambda: {"avx2"})
-    elsewhere = build_config("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
+    elsewhere = LACConfig.build("lac/PointHazard-v0", 0, {"langevin_dtype": "auto"}, timesteps=1000)
     assert elsewhere.resolved() == {"langevin_dtype": "float32"}
     refused = r"resolved=\{'langevin_dtype': 'bfloat16'\} \(now \{'langevin_dtype': 'float32'\}\)"
     with pytest.raises(ValueError, match=refused):

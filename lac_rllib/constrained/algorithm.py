@@ -35,8 +35,10 @@ from lac_rllib.tasks import user as user_tasks
 
 #: Version of the lac-rllib keys in a checkpoint's rllib_checkpoint.json (lac_rllib.evaluation reads
 #: this one and format 2). 2: the classes moved to lac_rllib.algorithms / lac_rllib.constrained
-#: (0.2.0); 3: the algorithm's fields under ``algo_config`` (format 2 called them ``lac_config``).
-CHECKPOINT_FORMAT = 3
+#: (0.2.0); 3: the algorithm's fields under ``algo_config`` (format 2 called them ``lac_config``);
+#: 4: the on-policy family's module, learner and state on the shared bases of lac_rllib/constrained/
+#: (0.3.0: a format-3 PPO-Lag checkpoint names module classes that moved).
+CHECKPOINT_FORMAT = 4
 
 
 def resume_seed(seed: int, iteration: int) -> int:
@@ -46,11 +48,10 @@ def resume_seed(seed: int, iteration: int) -> int:
 
 
 class SafeAlgorithm(Algorithm):
-    """Base of the constrained algorithms; a subclass names itself in ``ALGO`` and its config class
-    in ``CONFIG_CLASS``, and implements ``training_step``, calling :meth:`log_top_level` at its end."""
+    """Base of the constrained algorithms; a subclass names its config class in ``CONFIG_CLASS``
+    (which names the algorithm: ``ALGO``) and implements ``training_step``, calling
+    :meth:`log_top_level` at its end."""
 
-    #: The algorithm's name in checkpoints and runs.
-    ALGO = ""
     #: Its config class (a SafeTaskConfig), which RLlib's ``get_default_config`` builds for it.
     CONFIG_CLASS: type | None = None
 
@@ -74,7 +75,7 @@ class SafeAlgorithm(Algorithm):
         ours = {
             "lac_rllib_version": importlib.metadata.version("lac-rllib"),
             "checkpoint_format": CHECKPOINT_FORMAT,
-            "algo": self.ALGO,
+            "algo": cfg.ALGO,  # the config's name: a user's config on a package algorithm names itself
             "task_id": cfg.task_id,
             "seed": cfg.seed,
             "cost_limit": cfg.effective_cost_limit,

@@ -5,13 +5,13 @@ A :class:`LagrangeMultiplier` owns ν's update: the projected step of eq. (14),
     ν ← min( ν_max, max(0, ν + α_ν·(Ĵ_C − b)) ),
 
 with the step itself pluggable (a :class:`StepRule`: eq. (14)'s gradient step, OmniSafe's Adam
-step, FSRL's PID controller; docs/spec.md §4), the authors' adaptive bound ν_max
+step, safety-starter-agents' Adam on softplus⁻¹(ν); docs/spec.md §4), the authors' adaptive bound ν_max
 (:class:`AdaptiveBound`, [C]), a fixed one (:class:`FixedBound`) or none, and its checkpoint
 state. Its *value* is the RLModule's ν buffer, which the multiplier is the only writer of: the
 buffer travels with the module's weights, so env runners, checkpoints and a restored policy
 (``--actions langevin``) all see the same ν.
 
-Plain torch, no RLlib: the learners call it (``lac_rllib.algorithms.lac.learner``).
+Plain torch, no RLlib: the learners call it (LAC's, SAC-Lag's, constrained/lagrangian_learner.py).
 """
 
 from __future__ import annotations
@@ -74,27 +74,28 @@ class AdamStep:
         self.m, self.v, self.t = float(state["m"]), float(state["v"]), int(state["t"])
 
 
-class PIDStep:
-    """FSRL's PID Lagrangian (``utils/optim_util.py``, after Stooke et al. 2020): with the error
-    e = Ĵ_C − b, I ← [I + e]₊ and ν = [k_p·e + k_i·I + k_d·[e − e_prev]₊]₊ (the rule sets ν itself,
-    whatever ν was)."""
+def softplus(x: float) -> float:
+    return max(x, 0.0) + math.log1p(math.exp(-abs(x)))
 
-    def __init__(self, kp: float, ki: float, kd: float):
-        self.kp, self.ki, self.kd = float(kp), float(ki), float(kd)
-        self.integral, self.previous_error = 0.0, 0.0
+
+class SoftplusAdamStep:
+    """[S] run_agent.py: ν = softplus(p), p₀ = softplus⁻¹(ν₀), Adam on the loss −p·(Ĵ_C − b) (the loss
+    is on p itself: PPO-L sets ``penalty_param_loss``). ν ≥ 0 by construction."""
+
+    def __init__(self, lr: float, nu_init: float):
+        self.adam = AdamStep(lr)
+        self.p = math.log(max(math.expm1(nu_init), 1e-8))
 
     def step(self, nu: float, episode_cost: float, cost_limit: float) -> float:
-        error = episode_cost - cost_limit
-        self.integral = max(0.0, self.integral + error)
-        derivative = max(0.0, error - self.previous_error)
-        self.previous_error = error
-        return self.kp * error + self.ki * self.integral + self.kd * derivative
+        self.p = self.adam.step(self.p, episode_cost, cost_limit)
+        return softplus(self.p)
 
     def get_state(self) -> dict:
-        return {"integral": self.integral, "previous_error": self.previous_error}
+        return {"p": self.p, "adam": self.adam.get_state()}
 
     def set_state(self, state: dict) -> None:
-        self.integral, self.previous_error = float(state["integral"]), float(state["previous_error"])
+        self.p = float(state["p"])
+        self.adam.set_state(state["adam"])
 
 
 class AdaptiveBound:

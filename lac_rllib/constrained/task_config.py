@@ -70,8 +70,23 @@ class SafeTaskConfig:
     as config attributes, ``.task(id)``, the derived cost limit and discount, the observation
     filter, the episode-cost callback and RLlib's hooks naming the algorithm's classes.
 
-    The subclass declares ``PARAMS``, ``FIELDS``, ``PRESETS`` (preset name → field values; a task
-    names its preset) and its three classes, and sets RLlib's own settings in ``__init__``."""
+    Everything an algorithm declares is an attribute of its config class, inherited as Python
+    inherits: ``ALGO``, ``PARAMS``, ``FIELDS``, ``PRESETS`` (preset name → field values; a task
+    names its preset), its three classes, and below what the CLI, the sweep's plan and budgets,
+    lac-eval and the benchmarks read (lac_rllib/algorithms/registry.py maps names to these
+    classes). RLlib's own settings are set in ``__init__``."""
+
+    #: The algorithm's name in runs, sweeps and checkpoints: the registry's name of a package
+    #: algorithm; a user's config class that names none is named by its module's import path
+    #: (``__init_subclass__``), the path every process imports it by.
+    ALGO: str = ""
+    #: What ``lac-eval --actions`` accepts for its policies (lac_rllib/evaluation.py ACTION_MODES).
+    ACTIONS: tuple[str, ...] = ("generator",)
+    #: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
+    SPEED_FIELDS: frozenset = frozenset()
+    #: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS): budget → task preset (or
+    #: ``"*"``: any other) → field values; none: the preset's own values.
+    BUDGET_FIELDS: dict[str, dict[str, dict[str, Any]]] = {}
 
     #: Preset name → the field values it sets (docs/spec.md §5).
     PRESETS: dict[str, dict[str, Any]] = {}
@@ -87,6 +102,29 @@ class SafeTaskConfig:
     #: config), imported when first asked for: the algorithm's module imports its config, and the
     #: config's module stays as light as the CLI and every env runner that unpickles it need.
     ALGORITHM_CLASS = RL_MODULE_CLASS = LEARNER_CLASS = ""
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "ALGO" not in vars(cls):  # a user's config: named by where it lives
+            cls.ALGO = cls.__module__
+
+    @classmethod
+    def benchmark_fields(cls, benchmark: str, steps: int) -> dict[str, Any]:
+        """The fields benchmarks/update_step.py and iteration.py (``benchmark``) build it with to time
+        ``steps`` env steps; none here."""
+        return {}
+
+    @classmethod
+    def plan_update_s(cls, params: dict, preset: str) -> float:
+        """The plan's estimate of its update seconds per env step on one CPU beyond sampling, for a
+        trial's ``params`` on a task of ``preset``; 0 here (the estimate is the sampling alone)."""
+        return 0.0
+
+    @classmethod
+    def multiplier_warmup(cls, params: dict) -> int:
+        """The env steps before its multiplier can act on the policy, for a trial's ``params``
+        (early stopping waits for them: sweeps/scheduler.py); 0 here."""
+        return 0
 
     def __init__(self, algo_class=None):
         super().__init__(algo_class=algo_class or deserialize_type(self.ALGORITHM_CLASS, error=True))

@@ -383,7 +383,8 @@ def apply() -> types.ModuleType:
         if _STATE["module"] is not None:
             _reclaim_gym_ids()  # cheap; covers lac tasks registered after the first call
             return _STATE["module"]
-        import lac_rllib.tasks  # noqa: F401  (lac-rllib ids are registered before safety's)
+        # lac-rllib's ids are registered before safety's: importing this module ran
+        # lac_rllib/tasks/__init__.py first (Python imports a package before its modules).
 
         # If something else already imported safety_gymnasium (with its own fixes), the import
         # below is a no-op and only patches 3-4 and the registry fix are added.

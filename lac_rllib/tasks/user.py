@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lac_rllib.errors import cut, excerpt
+from lac_rllib.errors import announce, cut, excerpt
 from lac_rllib.tasks.registry import TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.user:make_env"
@@ -143,6 +143,7 @@ def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = 
     """The TaskSpec of a user's env, after building it once and stepping it (``check_env``); registered.
     Its module is imported from the Python path, else from the first of ``search_dirs`` holding it."""
     source = factory or gym_id
+    announce(f"building and stepping your env {source} (task {task_id})")
     env_kwargs = {"factory": factory, "gym_id": gym_id, "cost_key": cost_key, **(kwargs or {})}
     module = _module_of(env_kwargs)
     if module:

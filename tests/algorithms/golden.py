@@ -22,7 +22,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS
 from lac_rllib.constrained.metrics import COST_VF_LOSS, TS_EPISODE_COSTS
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "golden"

@@ -18,8 +18,8 @@ from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
 
 from lac_rllib.algorithms.cpo import learner as cpo_learner
 from lac_rllib.algorithms.pcpo import learner as pcpo_learner
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
-from lac_rllib.algorithms.trpo_lag import learner as trpo_learner
+from lac_rllib.constrained import trust_region_learner as trpo_learner
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.metrics import COST_VF_LOSS, TS_EPISODE_COSTS
 from tests.algorithms.golden import OMNISAFE_ON_POLICY, Fixture, build_on_policy, minibatch_step, on_policy_batch, ours
 

@@ -12,13 +12,13 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
 from lac_rllib.algorithms import registry
-from lac_rllib.algorithms.ppo_lag import algorithm as ppo_lag_algorithm
+from lac_rllib.constrained import on_policy as on_policy_algorithm
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.metrics import COST_RATE, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU
 
 FIRST_ORDER = ("focops", "cup", "p3o", "respo")
 TRUST_REGION = ("trpo_lag", "cpo", "pcpo")
-ON_PPO_LAG_HOUSE = FIRST_ORDER + TRUST_REGION
+ON_POLICY = FIRST_ORDER + TRUST_REGION
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 SMALL = {"train_batch_size_per_learner": 200, "minibatch_size": 50, "num_epochs": 2, "num_envs_per_env_runner": 1}
 
@@ -35,7 +35,7 @@ def _flat(tree, prefix=""):
     return {prefix: tree}
 
 
-@pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)
+@pytest.mark.parametrize("algo", ON_POLICY)
 def test_every_train_row_carries_its_own_cost(ray_session, monkeypatch, algo):
     # 50 steps per iteration with 7-step episodes: chunks are cut mid-episode every time.
     learner_class = registry.build_config(algo, PROBE, 0, {}, timesteps=1000).get_default_learner_class()
@@ -64,7 +64,7 @@ def test_every_train_row_carries_its_own_cost(ray_session, monkeypatch, algo):
     assert 6.5 < result[COST_RATE] <= 7.0 and result[COST_RATE] == result["cost_total"] / result[ENV_STEPS]
 
 
-@pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)
+@pytest.mark.parametrize("algo", ON_POLICY)
 def test_a_checkpoint_round_trip_gives_an_identical_next_iteration(ray_session, monkeypatch, tmp_path, algo):
     """After 2 iterations: save, restore, and train one more iteration on the same sampled episodes
     from the original and from the restored algorithm: every learner tensor (weights, optimizer
@@ -77,10 +77,10 @@ def test_a_checkpoint_round_trip_gives_an_identical_next_iteration(ray_session, 
             a.train()
         path = a.save_to_path(str(tmp_path / "ckpt"))
         restored = type(a).from_checkpoint(path)
-        episodes, metrics = ppo_lag_algorithm.synchronous_parallel_sample(
+        episodes, metrics = on_policy_algorithm.synchronous_parallel_sample(
             worker_set=a.env_runner_group, max_env_steps=200, sample_timeout_s=None, _uses_new_env_runners=True,
             _return_metrics=True)
-        monkeypatch.setattr(ppo_lag_algorithm, "synchronous_parallel_sample",
+        monkeypatch.setattr(on_policy_algorithm, "synchronous_parallel_sample",
                             lambda **_: (copy.deepcopy(episodes), copy.deepcopy(metrics)))
         states = []
         for algorithm in (a, restored):
@@ -100,14 +100,14 @@ def test_a_checkpoint_round_trip_gives_an_identical_next_iteration(ray_session, 
             restored.stop()
 
 
-@pytest.mark.parametrize("algo", ON_PPO_LAG_HOUSE)
+@pytest.mark.parametrize("algo", ON_POLICY)
 def test_the_registry_names_it_everywhere(algo):
     module = registry.algo_config(algo)
     assert registry.check_algo(algo) == algo and algo in registry.algos_text()
     config = registry.build_config(algo, "SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
-    assert config.algo_class.ALGO == algo and config.preset == "safety_gym"
-    assert set(registry.reported_keys(algo)) >= {"policy_loss", "vf_loss", "cost_vf_loss"}
+    assert config.ALGO == algo and config.preset == "safety_gym"
+    assert set(module.REPORTED_KEYS) >= {"policy_loss", "vf_loss", "cost_vf_loss"}
     assert registry.budget_fields(algo, "smoke", "safety_gym")["train_batch_size_per_learner"] == 500
-    assert registry.actions(algo) == ("generator",) and "torch_threads" in registry.speed_fields(algo)
+    assert registry.actions(algo) == ("generator", "stochastic") and "torch_threads" in registry.speed_fields(algo)
     with pytest.raises(ValueError, match=f"unknown {module.FIELDS.what} config field 'nope'"):
         registry.parse_sets(algo, ["nope=1"])

@@ -27,15 +27,19 @@ def test_the_plan_rate_is_the_algorithm_s_own():
     assert sac[1] == pytest.approx(2 * sac[0])
 
 
+def keys(algo):
+    return registry.algo_config(algo).REPORTED_KEYS
+
+
 def test_each_algorithm_reports_its_own_learner_keys():
-    assert set(metrics.CHAIN_HEALTH_KEYS) <= set(registry.reported_keys("lac"))
-    assert not set(metrics.CHAIN_HEALTH_KEYS) & set(registry.reported_keys("ppo_lag"))
-    assert set(metrics.PPO_LAG_KEYS) == set(registry.reported_keys("ppo_lag"))
+    assert set(metrics.CHAIN_HEALTH_KEYS) <= set(keys("lac"))
+    assert not set(metrics.CHAIN_HEALTH_KEYS) & set(keys("ppo_lag"))
+    assert set(metrics.PPO_LAG_KEYS) == set(keys("ppo_lag"))
     learner = {metrics.LANGEVIN_AT_BOUND: 0.2, metrics.POLICY_LOSS: 1.5, "num_module_steps_trained": 7}
     result = {**{k: 1.0 for k in metrics.TOP_LEVEL_KEYS}, "training_iteration": 3,
               metrics.LEARNER_RESULTS: {metrics.DEFAULT_MODULE_ID: learner}}
-    lac_row = metrics.iteration_row(result, registry.reported_keys("lac"))
-    ppo_row = metrics.iteration_row(result, registry.reported_keys("ppo_lag"))
+    lac_row = metrics.iteration_row(result, keys("lac"))
+    ppo_row = metrics.iteration_row(result, keys("ppo_lag"))
     assert metrics.LANGEVIN_AT_BOUND in lac_row and metrics.POLICY_LOSS not in lac_row
     assert metrics.POLICY_LOSS in ppo_row and metrics.LANGEVIN_AT_BOUND not in ppo_row
     assert "num_module_steps_trained" not in lac_row and lac_row[metrics.ITERATION] == 3
@@ -55,13 +59,25 @@ def test_an_algorithm_that_declares_nothing_gets_the_defaults(monkeypatch):
     class BareConfig(SafeTaskConfig):
         pass
 
-    bare.CONFIG_CLASS = BareConfig
+    bare.BareConfig = BareConfig
     monkeypatch.setitem(sys.modules, "bare_algo_config", bare)
-    monkeypatch.setitem(registry.ALGOS, "bare", "bare_algo_config")
+    monkeypatch.setitem(registry.ALGOS, "bare", "bare_algo_config.BareConfig")
     assert registry.budget_fields("bare", "smoke", "tiny") == {}
     assert registry.plan_update_s("bare", {}, "tiny") == 0.0
-    assert registry.reported_keys("bare") == ()
+    assert registry.warmup_env_steps("bare", {"x": 1}) == 0 and registry.actions("bare") == ("generator",)
+    assert keys("bare") == () and registry.speed_fields("bare") == frozenset()
     assert "bare" in registry.algos_text()
+
+
+def test_declarations_are_inherited_as_python_inherits_them():
+    """An algorithm on another declares only what differs: FOCOPS's speed fields and actions are
+    PPO-Lag's object, CUP's plan rate its own; houses are read off the config classes."""
+    assert registry.algo_config("focops").SPEED_FIELDS is registry.algo_config("ppo_lag").SPEED_FIELDS
+    assert registry.plan_update_s("cup", {}, "tiny") == 2 * registry.plan_update_s("ppo_lag", {}, "tiny")
+    houses = {a: registry.house(a) for a in registry.ALGOS}
+    assert houses == {"lac": None, "ppo_lag": None, "sac_lag": None, "focops": "ppo_lag", "cup": "ppo_lag",
+                      "p3o": None, "respo": "ppo_lag", "trpo_lag": None, "cpo": None, "pcpo": "cpo"}
+    assert all(registry.algo_config(a).ALGO == a for a in registry.ALGOS)
 
 
 # ---------------------------------------------------------------- a user's own algorithm (tests/algorithms/toy_algo.py)
@@ -69,54 +85,42 @@ TOY = "tests.algorithms.toy_algo"
 REPO = str(__import__("pathlib").Path(__file__).resolve().parents[2])
 
 
-def test_every_algorithm_exposes_the_names_a_users_module_must():
-    for algo in registry.ALGOS:
-        assert [n for n in registry.REQUIRED if not hasattr(registry.algo_config(algo), n)] == [], algo
-
-
 def test_a_users_algorithm_is_named_by_its_import_path_and_read_like_the_package_s(monkeypatch):
     monkeypatch.syspath_prepend(REPO)
     assert registry.check_algo(TOY) == TOY and not registry.is_builtin(TOY)
-    assert registry.algo_config(TOY).__name__ == TOY
+    assert registry.algo_config(TOY).__name__ == "ToyConfig" and registry.algo_config(TOY).ALGO == TOY
     # Its own sizes at the smoke budget, its own reported key, the defaults where it declares nothing.
     assert registry.budget_fields(TOY, "smoke", "tiny")["hidden"] == (16, 16)
     assert registry.budget_fields("ppo_lag", "smoke", "tiny")["hidden"] == (32, 32)
-    assert registry.reported_keys(TOY)[-1] == "toy_marker" and "toy_marker" not in registry.reported_keys("ppo_lag")
-    # What it does not declare it takes from its house, PPO-Lag (registry.declared).
+    assert keys(TOY)[-1] == "toy_marker" and "toy_marker" not in keys("ppo_lag")
+    # What it does not declare it inherits from its house, PPO-Lag.
     assert registry.plan_update_s(TOY, {}, "tiny") == registry.plan_update_s("ppo_lag", {}, "tiny") > 0
     assert registry.speed_fields(TOY) == registry.speed_fields("ppo_lag")
     assert registry.warmup_env_steps(TOY, {"train_batch_size_per_learner": 400}) == 800
     config = registry.build_config(TOY, "lac/PointHazard-v0", 0, {"toy_marker": 2.5}, timesteps=2000)
-    assert config.params()["toy_marker"] == 2.5 and config.algo_class.ALGO == TOY
+    assert config.params()["toy_marker"] == 2.5 and config.ALGO == TOY and registry.house(TOY) == "ppo_lag"
     assert registry.parse_sets(TOY, ["toy_marker=3.0"]) == {"toy_marker": 3.0}
     assert registry.module_dir(TOY) == REPO and registry.module_dir("lac") is None  # where trials import it from
 
 
 ALGO_MODULES = {
-    "half_algo": ("CONFIG_CLASS = object\nACTIONS = ('generator',)\n",
-                  "algo half_algo: its module lacks PARAMS, FIELDS, PRESETS; accepted: "
-                  "a module exposing CONFIG_CLASS, PARAMS"),
-    # An algorithm of its own (no house to take them from) that does not say how it acts.
-    "orphan_algo": ("from ray.rllib.algorithms.algorithm import Algorithm\n"
-                    "from ray.rllib.algorithms.algorithm_config import AlgorithmConfig\n"
-                    "class OrphanAlgo(Algorithm):\n    ALGO = 'orphan_algo'\n"
-                    "class OrphanConfig(AlgorithmConfig):\n"
-                    "    ALGORITHM_CLASS = 'orphan_algo.OrphanAlgo'\n"
-                    "    def __init__(self):\n        super().__init__(algo_class=OrphanAlgo)\n"
-                    "CONFIG_CLASS, PARAMS, FIELDS, PRESETS = OrphanConfig, None, None, {}\n",
-                    "algo orphan_algo: neither its module nor the algorithm it extends declares SPEED_FIELDS, "
-                    "ACTIONS; accepted: a module exposing CONFIG_CLASS, PARAMS, FIELDS, PRESETS, SPEED_FIELDS, "
-                    "ACTIONS"),
+    "empty_algo": ("X = 1\n", "algo empty_algo: its module must define one config class named 'empty_algo' (ALGO); "
+                   "found none"),
+    # PPO-Lag's config imported as it is: it names itself ppo_lag, so every checkpoint would.
+    "borrowed_algo": ("from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig  # noqa\n",
+                      "algo borrowed_algo: its module must define one config class named 'borrowed_algo' (ALGO); "
+                      "found none"),
+    "renamed_algo": ("from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig\n"
+                     "class MyConfig(PPOLagConfig):\n    ALGO = 'ppo_lag'\n",
+                     "found MyConfig (ALGO 'ppo_lag')"),
+    "learnerless_algo": ("from lac_rllib.constrained.task_config import SafeTaskConfig\n"
+                         "class MyConfig(SafeTaskConfig):\n    pass\n",
+                         "algo learnerless_algo: MyConfig declares no FIELDS, LEARNER_CLASS, ALGORITHM_CLASS"),
     "broken_algo": ("raise RuntimeError('needs a GPU')\n",
                     "algo broken_algo: cannot be imported (RuntimeError: needs a GPU)"),
     "needy_algo": ("import not_installed_dependency\n",
                    "algo needy_algo: cannot be imported (ModuleNotFoundError: No module named "
                    "'not_installed_dependency')"),
-    # PPO-Lag's names re-exported as they are: its algorithm would call itself ppo_lag in every checkpoint.
-    "borrowed_algo": ("from lac_rllib.algorithms.ppo_lag.config import *  # noqa\n"
-                      "from lac_rllib.algorithms.ppo_lag.config import CONFIG_CLASS, PARAMS, FIELDS, PRESETS\n",
-                      "algo borrowed_algo: its algorithm PPOLag names itself 'ppo_lag' (ALGO); accepted: "
-                      "ALGO = 'borrowed_algo'"),
     "nowhere.algo": (None, f"unknown algo 'nowhere.algo'; accepted: {registry.algos_text()}, or the import path of "
                            "your own algorithm's module (no module 'nowhere' on the Python path nor"),
     "my-algo": (None, f"unknown algo 'my-algo'; accepted: {registry.algos_text()}, or the import path"),
@@ -134,3 +138,15 @@ def test_a_users_module_that_cannot_run_is_one_line_naming_it(tmp_path, monkeypa
         registry.check_algo(name, (str(tmp_path),))
     assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
     assert name not in registry._USER  # refused: checked again next time, not remembered
+
+
+def test_a_users_module_is_announced_before_its_code_runs(tmp_path, monkeypatch, capsys):
+    """A slow or hanging import is the user's code, said first: the CLI is never silent before Ray."""
+    (tmp_path / "chatty_algo.py").write_text("import sys\nprint('module body runs', file=sys.stderr)\n")
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    with pytest.raises(ValueError):  # it defines no config class: refused after the import
+        registry.check_algo("chatty_algo", (str(tmp_path),))
+    err = capsys.readouterr().err
+    assert "lac-rllib: importing your algorithm's module chatty_algo" in err
+    assert err.index("importing your algorithm's module chatty_algo") < err.index("module body runs")
+    sys.modules.pop("chatty_algo", None)

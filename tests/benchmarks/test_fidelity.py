@@ -117,7 +117,7 @@ def test_the_table_shows_the_published_figures_of_the_algorithms_it_ran(fidelity
     variants = fidelity.variant_algos(commands)
     assert variants == {"cpo": ("cpo", False), "trpo": ("trpo_lag", True), "defaults": ("lac", False)}
     rows = fidelity.published_rows("SafetyPointGoal1-v0", variants, shown=[])
-    # CPO's figures from sweeps/published.yaml (the paper's Table 2 and OmniSafe's), OmniSafe's
+    # CPO's figures from sweeps/reports/published.yaml (the paper's Table 2 and OmniSafe's), OmniSafe's
     # unconstrained TRPO beside the pinned run; nothing for LAC (its paper row is the table's own).
     assert rows == ["| paper CPO, 2.5M steps | | 23.16 ± 2.09 | 46.00 ± 15.85 | | | |",
                     "| OmniSafe CPO, 10M steps | | 20.46 ± 1.38 | 28.84 ± 7.76 | | | |",
@@ -165,7 +165,7 @@ def test_a_run_at_500k_is_set_beside_omnisafes_figure_at_500k_read_from_its_curv
     assert "| OmniSafe SAC-Lag, 500k steps, read from a curve | | 25.6 (read ±1) | 47 (read ±4) | | | |" in text
     assert "12.96" not in text and "21.45" not in text  # not their 1e7 / 3e6 tables
     assert (f"Read from a curve: the height of the source's mean curve at that budget in [lag_pointgoal1_3e6.png]"
-            f"({LAG_PG1}), [first_order_pointgoal1_1e7.png]({FIRST_ORDER_PG1}) (sweeps/published.yaml), ± the "
+            f"({LAG_PG1}), [first_order_pointgoal1_1e7.png]({FIRST_ORDER_PG1}) (sweeps/reports/published.yaml), ± the "
             "reading's tolerance, not a std over seeds.") in text
     assert text.count("| OmniSafe PPO-L,") == 1  # shown once though the variant runs it too
     # Nothing is read at 750k: the final figures, each with its budget, and no curve named.

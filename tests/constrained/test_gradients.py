@@ -6,7 +6,7 @@ import logging
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 
-from lac_rllib.algorithms.sac_lag.config import build_config
+from lac_rllib.algorithms.sac_lag.config import SACLagConfig
 from lac_rllib.constrained.gradients import clip_global_norm_, clip_global_norms_, polyak_, zero_non_finite_
 from lac_rllib.tasks import get_task
 
@@ -55,7 +55,7 @@ def test_the_step_equals_rllibs_own_guard_with_one_nan_gradient(one_torch_thread
     """Our default (RLlib's per-tensor tests off, ours on) against RLlib's guard: the same weights
     after a step where one tensor's gradient is NaN and the others are finite."""
     def learner(rllib_guard: bool):
-        config = build_config("lac/PointHazard-v0", 0, {"actor_hidden": (16, 16), "critic_hidden": (16, 16)})
+        config = SACLagConfig.build("lac/PointHazard-v0", 0, {"actor_hidden": (16, 16), "critic_hidden": (16, 16)})
         assert config.torch_skip_nan_gradients  # the default: ours only
         config.torch_skip_nan_gradients = not rllib_guard
         return config.build_learner(env=get_task("lac/PointHazard-v0").make({}))

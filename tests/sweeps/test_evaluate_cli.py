@@ -127,9 +127,40 @@ def test_cli_bad_arguments_exit_2(checkpoint, capsys):
     code, _, err = run_main(capsys, "--checkpoint", checkpoint, "--episodes", "0")
     assert code == 2 and "--episodes 0 is invalid" in err
     code, _, err = run_main(capsys, "--checkpoint", checkpoint, "--langevin-steps", "5")
-    assert code == 2 and "need --actions langevin" in err
+    assert code == 2 and "need a chain mode (--actions langevin)" in err
     code, _, err = run_main(capsys, "--episodes", "1")
     assert code == 2 and "one of the arguments" in err
+
+
+@pytest.fixture(scope="module")
+def ppo_lag_checkpoint(tmp_path_factory, ray_session):
+    """A PPO-Lag checkpoint after one tiny iteration."""
+    from lac_rllib.algorithms.registry import build_config
+
+    algo = build_config("ppo_lag", TASK, 0, {"train_batch_size_per_learner": 400, "minibatch_size": 100,
+                                             "num_epochs": 1, "num_envs_per_env_runner": 1},
+                        timesteps=1000).build_algo()
+    try:
+        algo.train()
+        return algo.save_to_path(str(tmp_path_factory.mktemp("ppo_lag") / "ckpt"))
+    finally:
+        algo.stop()
+
+
+def test_cli_takes_the_modes_the_algorithm_declares(ppo_lag_checkpoint, capsys):
+    """PPO-Lag declares generator and stochastic (its config's ACTIONS): a draw from π evaluates, and
+    repeats at the same seed; LAC's chain is refused in one line naming the accepted modes."""
+    runs = [run_main(capsys, "--checkpoint", ppo_lag_checkpoint, "--actions", "stochastic", "--episodes", "2",
+                     "--json", "--no-progress") for _ in range(2)]
+    (code, out, _), (_, again, _) = runs
+    result = json.loads(out.strip().splitlines()[-1])
+    assert code == 0 and result["actions"] == "stochastic" and result["episodes"] == 2
+    assert result["algo"] == "ppo_lag" and json.loads(again.strip().splitlines()[-1]) == result
+    code, _, err = run_main(capsys, "--checkpoint", ppo_lag_checkpoint, "--actions", "langevin", "--no-progress")
+    line = err.strip().splitlines()[-1]
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "--actions langevin is not a mode of ppo_lag" in line
+    assert "accepted: --actions generator | stochastic" in line
 
 
 # ----------------------------------------------------------------------------- MLflow

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from lac_rllib.algorithms.registry import ALGOS, algos_text
+from sweeps import estimate
 from sweeps import run as cli
 
 README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
@@ -56,11 +57,11 @@ def test_the_estimate_counts_the_chain_length_the_trial_runs(tmp_path, monkeypat
 
     chain = CHAIN_S_PER_STEP["safety_gym"] * steps
 
-    step_s = cli.seconds_per_env_step("SafetyPointButton1-v0", 10)  # the preset's 10 envs per runner
+    step_s = estimate.seconds_per_env_step("SafetyPointButton1-v0", 10)  # the preset's 10 envs per runner
 
     def formula(t):  # one trial, 1 CPU: the estimate is this trial's, its evaluation block included
-        evaluation = 2 * 10 * 1000 * cli.eval_seconds_per_env_step("SafetyPointButton1-v0")
-        return cli.STARTUP_S + steps * step_s + chain * t + evaluation
+        evaluation = 2 * 10 * 1000 * estimate.eval_seconds_per_env_step("SafetyPointButton1-v0")
+        return estimate.STARTUP_S + steps * step_s + chain * t + evaluation
 
     args = ("--space", "paper", "--task", "SafetyPointButton1-v0", "--budget", "paper", "--seeds", "1")
     plan = _plan(tmp_path, monkeypatch, *args)
@@ -198,6 +199,25 @@ def test_on_a_cluster_the_wall_time_is_estimated_again_at_its_cpus(tmp_path, mon
     assert "cluster: 48 CPUs -> 24 trials at once; estimated wall time ~" in capsys.readouterr().out
 
 
+def test_a_sweep_under_a_minute_is_planned_in_seconds(tmp_path, monkeypatch, capsys):
+    """A smoke sweep of a few tens of seconds used to be planned as "~0 min"."""
+    f = tmp_path / "short.yaml"
+    f.write_text("task: lac/PointHazard-v0\nbudget: smoke\nseeds: 1\neval_episodes: 0\n")
+    plan = _plan(tmp_path, monkeypatch, "--config", str(f))
+    assert 10 < plan.estimated_wall_s < 59
+    cli.print_plan(plan)
+    out = capsys.readouterr().out
+    assert f"estimated wall time: ~{plan.estimated_wall_s:.0f} s at 1 trials at a time" in out, out
+    assert "~0 min" not in out
+    # The cluster's line says it the same way; a minute and more reads in minutes, as before.
+    from sweeps.sweep import at_cluster_concurrency
+
+    at_cluster_concurrency(plan, 8)
+    assert f"estimated wall time ~{plan.estimated_wall_s:.0f} s," in capsys.readouterr().out
+    assert [estimate.duration_text(s) for s in (0.4, 40, 59.4, 59.6, 89, 1800)] == [
+        "~0 s", "~40 s", "~59 s", "~1 min", "~1 min", "~30 min"]
+
+
 def test_a_slower_env_is_counted_by_its_step_cost(tmp_path, monkeypatch):
     """A Button1 step costs ~3 Goal1 steps (TaskSpec.step_cost): the env's share of the trial's
     time (training and evaluation) grows by it, the algorithm's update share does not."""
@@ -205,11 +225,11 @@ def test_a_slower_env_is_counted_by_its_step_cost(tmp_path, monkeypatch):
 
     goal, button = get_task("SafetyPointGoal1-v0"), get_task("SafetyPointButton1-v0")
     assert goal.step_cost == 1.0 and button.step_cost > 2.5  # the reference, and a slower task
-    assert cli.seconds_per_env_step(goal.id) == pytest.approx(1 / cli.RATE["safety_gym"])  # the rate's own
-    assert cli.seconds_per_env_step(button.id) == pytest.approx(cli.seconds_per_env_step(goal.id) * (
-        1 + cli.ENV_SHARE * (button.step_cost - 1) / (cli.ENV_SHARE + (1 - cli.ENV_SHARE) / 10)))
-    assert cli.eval_seconds_per_env_step(button.id) == pytest.approx(
-        (1 + cli.EVAL_ENV_SHARE * (button.step_cost - 1)) / cli.RATE["safety_gym"])
+    assert estimate.seconds_per_env_step(goal.id) == pytest.approx(1 / estimate.RATE["safety_gym"])  # the rate's own
+    assert estimate.seconds_per_env_step(button.id) == pytest.approx(estimate.seconds_per_env_step(goal.id) * (
+        1 + estimate.ENV_SHARE * (button.step_cost - 1) / (estimate.ENV_SHARE + (1 - estimate.ENV_SHARE) / 10)))
+    assert estimate.eval_seconds_per_env_step(button.id) == pytest.approx(
+        (1 + estimate.EVAL_ENV_SHARE * (button.step_cost - 1)) / estimate.RATE["safety_gym"])
     f = tmp_path / "s.yaml"
 
     def wall(task):
@@ -217,17 +237,18 @@ def test_a_slower_env_is_counted_by_its_step_cost(tmp_path, monkeypatch):
         return _plan(tmp_path, monkeypatch, "--config", str(f)).estimated_wall_s
 
     # training at PPO-Lag's 10 envs per runner, then 2 modes x 10 episodes of evaluation
-    extra = ((cli.seconds_per_env_step(button.id, 10) - cli.seconds_per_env_step(goal.id, 10)) * 40_000
-             + (cli.eval_seconds_per_env_step(button.id) - cli.eval_seconds_per_env_step(goal.id)) * 20_000)
+    extra = ((estimate.seconds_per_env_step(button.id, 10) - estimate.seconds_per_env_step(goal.id, 10)) * 40_000
+             + (estimate.eval_seconds_per_env_step(button.id) - estimate.eval_seconds_per_env_step(goal.id)) * 20_000)
     assert wall(button.id) - wall(goal.id) == pytest.approx(extra)
-    assert extra > 0.5 * (wall(goal.id) - cli.STARTUP_S)  # a difference a user would see
+    assert extra > 0.5 * (wall(goal.id) - estimate.STARTUP_S)  # a difference a user would see
 
 
 def test_one_env_per_runner_samples_slower_than_the_presets_ten():
     """The rate holds at the preset's envs per runner; one env (SAC-Lag's, the quick budget's) pays
     the policy's forward and RLlib's per-step work on every step: ~2x slower per step."""
-    one, ten = cli.seconds_per_env_step("SafetyPointGoal1-v0", 1), cli.seconds_per_env_step("SafetyPointGoal1-v0", 10)
-    assert one / ten == pytest.approx(1 / (cli.ENV_SHARE + (1 - cli.ENV_SHARE) / 10)) and 1.8 < one / ten < 2.6
+    one, ten = (estimate.seconds_per_env_step("SafetyPointGoal1-v0", n) for n in (1, 10))
+    share = estimate.ENV_SHARE
+    assert one / ten == pytest.approx(1 / (share + (1 - share) / 10)) and 1.8 < one / ten < 2.6
 
 
 def test_the_estimate_counts_the_evaluation_blocks(tmp_path, monkeypatch, capsys):
@@ -241,7 +262,7 @@ def test_the_estimate_counts_the_evaluation_blocks(tmp_path, monkeypatch, capsys
     assert none.eval_share == 0.0 and 0 < end.eval_share < every.eval_share
     # 2 modes x 10 episodes x 1,000 steps at the preset's rate, once at the end; PPO-Lag's 20k-step
     # iterations at 40k steps: with eval_every 1, 2 more blocks.
-    block = 2 * 10 * 1000 * cli.eval_seconds_per_env_step("SafetyPointGoal1-v0")
+    block = 2 * 10 * 1000 * estimate.eval_seconds_per_env_step("SafetyPointGoal1-v0")
     assert end.estimated_wall_s - none.estimated_wall_s == pytest.approx(block)
     assert every.estimated_wall_s - none.estimated_wall_s == pytest.approx(3 * block)
     cli.print_plan(end)
@@ -258,7 +279,7 @@ def test_an_evaluation_episode_is_counted_at_its_tasks_episode_limit(tmp_path, m
         for extra in ("eval_episodes: 0\n", ""):
             f.write_text(f"task: {task}\nbudget: 40000\nseeds: 1\nalgo: ppo_lag\n" + extra)
             walls.append(_plan(tmp_path, monkeypatch, "--config", str(f)).estimated_wall_s)
-        return (walls[1] - walls[0]) / (2 * 10 * cli.eval_seconds_per_env_step(task))  # steps per episode
+        return (walls[1] - walls[0]) / (2 * 10 * estimate.eval_seconds_per_env_step(task))  # steps per episode
 
     assert eval_s("SafetyPointCircle1-v0") == pytest.approx(500)
     assert eval_s("SafetyPointGoal1-v0") == pytest.approx(1000)

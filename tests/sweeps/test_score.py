@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from sweeps import score
-from sweeps.results import scored
+from sweeps.reports.results import scored
 
 
 def _curve(costs, returns=None, step=1000):

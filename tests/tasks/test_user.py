@@ -4,6 +4,7 @@ import sys
 from pathlib import Path
 
 import gymnasium as gym
+import pytest
 
 from lac_rllib.tasks.user import user_task
 
@@ -24,3 +25,17 @@ def test_a_user_tasks_episode_limit_is_its_gymnasium_time_limit_where_it_has_one
         sys.path.remove(USER_ENVS)
     assert registered.episode_steps == 40
     assert bare.episode_steps == 1000
+
+
+def test_building_a_users_env_is_announced_before_its_code_runs(tmp_path, monkeypatch, capsys):
+    """The env is the user's code: said on stderr before it is built and stepped, so a slow or
+    hanging constructor is never a silent command."""
+    (tmp_path / "chatty_env.py").write_text("import sys\n"
+                                            "def make(config):\n    print('constructor runs', file=sys.stderr)\n"
+                                            "    raise RuntimeError('no display')\n")
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    with pytest.raises(ValueError, match="cannot be built"):
+        user_task("mine/Chatty-v0", factory="chatty_env:make", cost_limit=1.0, search_dirs=(str(tmp_path),))
+    err = capsys.readouterr().err
+    said = "lac-rllib: building and stepping your env chatty_env:make (task mine/Chatty-v0)"
+    assert said in err and err.index(said) < err.index("constructor runs")

@@ -1,3 +1,3 @@
-"""CPO (Achiam et al. 2017) on TRPO-Lag's house: the trust-region step of the linearised
-constrained problem, no multiplier; OmniSafe's CPO by default, the paper's source
-(safety-starter-agents) as the ``ssa`` preset. The house of PCPO."""
+"""CPO (Achiam et al. 2017) = the trust-region base (constrained/trust_region_*.py) + CPO's step of
+the linearised constrained problem, no multiplier; OmniSafe's CPO by default, the paper's source
+(safety-starter-agents) as the ``ssa`` preset. PCPO builds on it."""

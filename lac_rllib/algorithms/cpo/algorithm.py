@@ -1,10 +1,11 @@
-"""CPO(TRPOLag): TRPO-Lag's training step (PPO-Lag's: sample, one learner update, sync) with CPO's learner."""
+"""CPO: the on-policy family's training step (constrained/on_policy.py: sample, one learner update,
+sync) with CPO's learner."""
 
 from __future__ import annotations
 
 from lac_rllib.algorithms.cpo.config import CPOConfig
-from lac_rllib.algorithms.trpo_lag.algorithm import TRPOLag
+from lac_rllib.constrained.on_policy import OnPolicySafeAlgorithm
 
 
-class CPO(TRPOLag):
-    ALGO, CONFIG_CLASS = "cpo", CPOConfig
+class CPO(OnPolicySafeAlgorithm):
+    CONFIG_CLASS = CPOConfig

@@ -1,6 +1,6 @@
-"""CPOConfig: Constrained Policy Optimization (Achiam et al. 2017) on TRPO-Lag's house.
+"""CPOConfig: Constrained Policy Optimization (Achiam et al. 2017) on the trust-region base.
 
-CPO takes TRPO-Lag's step (the whole batch, conjugate gradient, the line search) without a
+CPO takes the family's step (the whole batch, conjugate gradient, the line search) without a
 multiplier: the step solves the linearised problem max gᵀΔ s.t. bᵀΔ + c ≤ 0, ½ΔᵀHΔ ≤ δ in closed
 form from its dual, recovering along −H⁻¹b when no feasible point is in reach (learner.py;
 constrained/trust_region.py ``cpo_step``). :class:`CostStepParams` are the fields PCPO shares.
@@ -15,10 +15,16 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from lac_rllib.algorithms.trpo_lag import config as trpo_lag
-from lac_rllib.algorithms.trpo_lag.config import TRPOLagConfig, TrustRegionParams
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
+from lac_rllib.constrained.trust_region_config import (
+    OMNISAFE_STEP,
+    SSA_TRUST_REGION,
+    TRUST_REGION_KEYS,
+    TRUST_REGION_PRESETS,
+    TrustRegionConfig,
+    TrustRegionParams,
+)
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "ssa")
 COST_GAP_SCALES = ("none", "episode_length")
@@ -60,32 +66,21 @@ class CPOParams(CostStepParams):
     _update_actor: total_steps=20; S backtrack_iters 10]."""
 
 
-#: [S] CPO as the paper ran it: TRPO-Lag's ssa values and c divided by the mean episode length.
-SSA = {**trpo_lag.SSA_TRUST_REGION, "cost_gap_scale": "episode_length"}
-#: [O]'s KL and CG (TRPO-Lag's ``omnisafe`` preset): what PCPO's ``omnisafe`` preset takes from here.
-OMNISAFE_STEP: dict[str, Any] = dict(trpo_lag.PRESETS["omnisafe"])
+#: [S] CPO as the paper ran it: the family's ssa values and c divided by the mean episode length.
+SSA = {**SSA_TRUST_REGION, "cost_gap_scale": "episode_length"}
 PRESETS: dict[str, dict[str, Any]] = {
-    "safety_gym": {"num_envs_per_env_runner": 10},  # [O] CPO.yaml is the defaults (speed only, as TRPO-Lag's)
-    "mujoco": {"num_envs_per_env_runner": 5},
-    "tiny": dict(trpo_lag.TINY_TRUST_REGION),  # [D] TRPO-Lag's tiny sizes
+    **TRUST_REGION_PRESETS,  # [O] CPO.yaml is the defaults; the family's tiny sizes [D]
     # [O]'s own step: its KL (so its damping) and its dual (tests/algorithms/cpo/test_cpo_golden.py).
     "omnisafe": {**OMNISAFE_STEP, "dual_convention": "omnisafe"},
     "ssa": SSA,
 }
 
-#: CPO's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(CPOParams, "CPO")
 
-
-class CPOConfig(TRPOLagConfig):
+class CPOConfig(TrustRegionConfig):
     """Config for :class:`lac_rllib.algorithms.cpo.algorithm.CPO`; fields: :class:`CPOParams`."""
 
-    PARAMS, FIELDS, PRESETS = CPOParams, FIELDS, PRESETS
-    REPORTED_KEYS = (*trpo_lag.TRUST_REGION_KEYS, metrics.COST_GAP, metrics.CPO_CASE)
+    ALGO = "cpo"
+    PARAMS, FIELDS, PRESETS = CPOParams, fields.FieldSet(CPOParams, "CPO"), PRESETS
+    REPORTED_KEYS = (*TRUST_REGION_KEYS, metrics.COST_GAP, metrics.CPO_CASE)
     ALGORITHM_CLASS = "lac_rllib.algorithms.cpo.algorithm.CPO"
     LEARNER_CLASS = "lac_rllib.algorithms.cpo.learner.CPOTorchLearner"
-
-
-#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
-#: is its house's (registry.declared).
-CONFIG_CLASS, PARAMS = CPOConfig, CPOParams

@@ -1,8 +1,8 @@
-"""CPOTorchLearner: TRPO-Lag's learner with CPO's step and no multiplier. Source tags: [CPO]
+"""CPOTorchLearner: the trust-region base's learner with CPO's step and no multiplier. Source tags: [CPO]
 Achiam et al. 2017 (§6.1, §6.2, App. 10.2); [O] OmniSafe cpo.py ``_update_actor``; [S]
 safety-starter-agents agents.py ``CPOAgent.update_pi``. The maths is constrained/trust_region.py's.
 
-At the update's first loss call, on the whole batch's real rows (TRPO-Lag's :class:`PolicyOnBatch`):
+At the update's first loss call, on the whole batch's real rows (the base's :class:`PolicyOnBatch`):
 
     g = ∇ mean r·A^R,   b = ∇ mean r·A^C                        [O _loss_pi, _loss_pi_cost]
     x = H⁻¹g, p = H⁻¹b (two conjugate-gradient solves),  q = xᵀHx, r = gᵀp, s = bᵀp
@@ -12,7 +12,7 @@ then the case (0-4) and the step of the linearised problem max gᵀΔ s.t. c + b
 ½ΔᵀHΔ ≤ δ: TRPO's step when the whole trust region is feasible (3, 4), (x − ν*p)/λ* from the
 closed-form dual (1, 2), the recovery −√(2δ/s)·p when no feasible point is in reach (0); then
 the line search [O _cpo_search_step; S]: KL̄ ≤ δ, the cost surrogate rises by at most max(−c, 0),
-and in cases 2-4 the reward's loss does not rise. Ĵ_C is PPO-Lag's cost window; with no episode
+and in cases 2-4 the reward's loss does not rise. Ĵ_C is the base's cost window; with no episode
 completed yet c = −∞ (no known violation: case 3). ``nu`` reports ν* (0 in cases 3-4, the
 recovery's √(2δ/s) in case 0 [O Nu_star]); the module's ν stays 0. PCPO replaces
 :meth:`constrained_step`.
@@ -27,9 +27,8 @@ import torch
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.cpo.episode_lengths import EpisodeLengths
-from lac_rllib.algorithms.trpo_lag.learner import COST_ADVANTAGES, PolicyOnBatch, TRPOLagTorchLearner
-from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
+from lac_rllib.constrained.episode_lengths import EpisodeLengths
 from lac_rllib.constrained.metrics import COST_GAP, CPO_CASE, NU
 from lac_rllib.constrained.trust_region import (
     EPS,
@@ -39,31 +38,25 @@ from lac_rllib.constrained.trust_region import (
     fisher_vector_product,
     flat_grad,
 )
+from lac_rllib.constrained.trust_region_learner import PolicyOnBatch, TrustRegionTorchLearner
 
 #: The learner's own entry in its checkpointed state: the window of episode lengths.
 STATE_KEY = "cpo"
 
 
-class CPOTorchLearner(TRPOLagTorchLearner):
-    @override(TRPOLagTorchLearner)
+class CPOTorchLearner(TrustRegionTorchLearner):
+    @override(TrustRegionTorchLearner)
     def build(self) -> None:
-        super().build()
         self.episode_lengths = EpisodeLengths()
-        if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
-            self._learner_connector.prepend(self.episode_lengths)  # before the phantom step is appended
+        super().build()
         # The episodes' lengths, over the same episodes as the cost window (c's scale [S]).
         self.length_windows = {mid: collections.deque(maxlen=self.config.get_config_for_module(mid).cost_window)
                                for mid in self.module.keys()}
 
-    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
-        """No multiplier: ν pinned at 0 (a zero step), so PPO-Lag's bookkeeping of Ĵ_C runs as it is."""
-        config = self.config.get_config_for_module(module_id)
-        return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit,
-                                  rule=GradientStep(0.0), bounded=False)
-
-    def policy_advantages(self, config, module, batch) -> torch.Tensor:
-        """The reward surrogate's advantage: A^R alone [O CPO._update_actor: adv_r]."""
-        return batch[Postprocessing.ADVANTAGES]
+    @override(TrustRegionTorchLearner)
+    def learner_pieces(self) -> list:
+        """The base's, and the episodes' lengths first, before the phantom step is prepended."""
+        return [*super().learner_pieces(), ("prepend", self.episode_lengths)]
 
     def policy_step(self, module_id, config, module, policy: PolicyOnBatch):
         """CPO's step (the module docstring); returns the line search's result, KL̄ and the loss after."""
@@ -96,7 +89,7 @@ class CPOTorchLearner(TRPOLagTorchLearner):
         return out.step_direction, out.nu, out.case, {CPO_CASE: out.case}
 
     def cost_gap(self, module_id, config) -> float:
-        """c = Ĵ_C − d over PPO-Lag's cost window [O: EpCost's window], divided by the mean episode
+        """c = Ĵ_C − d over the base's cost window [O: EpCost's window], divided by the mean episode
         length over the same episodes with cost_gap_scale="episode_length" [S: ``c /= (rescale +
         EPS)``, its EpLen]; −∞ with no episode completed yet."""
         lengths = self.length_windows[module_id]
@@ -110,14 +103,14 @@ class CPOTorchLearner(TRPOLagTorchLearner):
         c = sum(costs) / len(costs) - config.effective_cost_limit
         return c / (sum(lengths) / len(lengths) + EPS) if scaled else c
 
-    # ----- state: the length window beside PPO-Lag's -----
-    @override(TRPOLagTorchLearner)
+    # ----- state: the length window beside the base's cost window -----
+    @override(TrustRegionTorchLearner)
     def get_state(self, *args, **kwargs):
         state = super().get_state(*args, **kwargs)
         state[STATE_KEY] = {mid: list(window) for mid, window in self.length_windows.items()}
         return state
 
-    @override(TRPOLagTorchLearner)
+    @override(TrustRegionTorchLearner)
     def set_state(self, state) -> None:
         super().set_state(state)
         for mid, lengths in state.get(STATE_KEY, {}).items():

@@ -13,4 +13,4 @@ from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
 
 
 class CUP(PPOLag):
-    ALGO, CONFIG_CLASS = "cup", CUPConfig
+    CONFIG_CLASS = CUPConfig

@@ -1,4 +1,4 @@
-"""CUPConfig: Constrained Update Projection on PPO-Lag's house.
+"""CUPConfig: Constrained Update Projection = PPO-Lag + a projection stage.
 
 CUP (Yang et al. 2022) updates the policy in two stages per iteration (its Algorithm 1): a policy
 improvement on the reward alone, PPO's clipped surrogate on A^R, then a projection back towards
@@ -17,9 +17,10 @@ import dataclasses
 from typing import Any
 
 from lac_rllib.algorithms.ppo_lag import config as ppo_lag
-from lac_rllib.algorithms.ppo_lag.config import OMNISAFE_BUDGET, OnPolicyLagParams, PPOLagConfig
+from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, POSITIVE, one_of, or_none, param
+from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, OnPolicyLagParams
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -58,30 +59,23 @@ PRESETS: dict[str, dict[str, Any]] = {
     "omnisafe": {"lr_decay_horizon": OMNISAFE_BUDGET},
 }
 
-#: CUP's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(CUPParams, "CUP")
-
 
 class CUPConfig(PPOLagConfig):
     """Config for :class:`lac_rllib.algorithms.cup.algorithm.CUP`; fields: :class:`CUPParams`."""
 
-    PARAMS, FIELDS, PRESETS = CUPParams, FIELDS, PRESETS
+    ALGO = "cup"
+    PARAMS, FIELDS, PRESETS = CUPParams, fields.FieldSet(CUPParams, "CUP"), PRESETS
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.PROJECTION_LOSS, metrics.PROJECTION_EPOCHS, metrics.PROJECTION_KL)
     ALGORITHM_CLASS = "lac_rllib.algorithms.cup.algorithm.CUP"
     LEARNER_CLASS = "lac_rllib.algorithms.cup.learner.CUPTorchLearner"
+
+    @classmethod
+    def plan_update_s(cls, params: dict, preset: str) -> float:
+        """Update seconds per env step on one CPU beyond sampling: PPO-Lag's, doubled for stage 2's
+        epochs (an upper estimate, not measured: stage 2 steps the policy only)."""
+        return 2.0 * PPOLagConfig.plan_update_s(params, preset)
 
     @property
     def stage2_epochs(self) -> int:
         """The projection's epochs: projection_epochs, else num_epochs [O update_iters]."""
         return int(self.num_epochs if self.projection_epochs is None else self.projection_epochs)
-
-
-#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
-#: is its house's (registry.declared).
-CONFIG_CLASS, PARAMS = CUPConfig, CUPParams
-
-
-def plan_update_s(params: dict, preset: str) -> float:
-    """Update seconds per env step on one CPU beyond sampling: PPO-Lag's, doubled for stage 2's
-    epochs (an upper estimate, not measured: stage 2 steps the policy only)."""
-    return 2.0 * ppo_lag.plan_update_s(params, preset)

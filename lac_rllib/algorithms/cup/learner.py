@@ -33,16 +33,11 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.cup.row_index import ROW_INDEX, AddRowIndex
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
-from lac_rllib.algorithms.ppo_lag.learner import (
-    COST_CRITIC,
-    CRITIC,
-    NETWORKS,
-    PPOLagTorchLearner,
-    gaussian_logp,
-)
+from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.metrics import PROJECTION_EPOCHS, PROJECTION_KL, PROJECTION_LOSS
 from lac_rllib.constrained.minibatch_loop import TS_MINIBATCHES
+from lac_rllib.constrained.on_policy_learner import POLICY, gaussian_logp
 from lac_rllib.constrained.projection import kl_to_reference
 
 
@@ -65,10 +60,13 @@ class CUPTorchLearner(PPOLagTorchLearner):
     @override(PPOLagTorchLearner)
     def build(self) -> None:
         super().build()
-        if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
-            self._learner_connector.append(AddRowIndex())  # after the cost GAE, whose last_batch it numbers
         self.stage_epochs = (self.config.num_epochs, self.config.stage2_epochs)
         self.projections: dict[str, Projection] = {}
+
+    @override(PPOLagTorchLearner)
+    def learner_pieces(self) -> list:
+        """PPO-Lag's, then each row's index in the batch, after the cost GAE whose last_batch it numbers."""
+        return [*super().learner_pieces(), ("append", AddRowIndex())]
 
     # ----- both stages in one call -----
     @override(PPOLagTorchLearner)
@@ -153,7 +151,8 @@ class CUPTorchLearner(PPOLagTorchLearner):
         if projection is None or projection.reference is None:
             return super().stopped_optimizers(module_id)
         stopped = projection.stopped_after is not None and self.progress[module_id].epoch >= projection.stopped_after
-        return NETWORKS if stopped else (CRITIC, COST_CRITIC)
+        critics = tuple(name for name in self.optimizer_names(module_id) if name != POLICY)
+        return self.optimizer_names(module_id) if stopped else critics
 
     @override(PPOLagTorchLearner)
     def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:

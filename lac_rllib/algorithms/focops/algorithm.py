@@ -7,4 +7,4 @@ from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
 
 
 class FOCOPS(PPOLag):
-    ALGO, CONFIG_CLASS = "focops", FOCOPSConfig
+    CONFIG_CLASS = FOCOPSConfig

@@ -1,4 +1,4 @@
-"""FOCOPSConfig: First-Order Constrained Optimization in Policy Space on PPO-Lag's house.
+"""FOCOPSConfig: First-Order Constrained Optimization in Policy Space = PPO-Lag with FOCOPS's policy loss.
 
 FOCOPS fits the policy to the optimal update policy of the constrained problem in the
 non-parametric space, π*(a|s) ∝ π_old(a|s)·exp(A(s, a)/λ_F) (Zhang et al. 2020, eq. 8; the
@@ -17,9 +17,10 @@ import dataclasses
 from typing import Any
 
 from lac_rllib.algorithms.ppo_lag import config as ppo_lag
-from lac_rllib.algorithms.ppo_lag.config import OMNISAFE_BUDGET, OnPolicyLagParams, PPOLagConfig
+from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import BOOL, POSITIVE, one_of, or_none, param
+from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, OnPolicyLagParams
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "paper")
 
@@ -82,19 +83,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": PAPER,
 }
 
-#: FOCOPS's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(FOCOPSParams, "FOCOPS")
-
 
 class FOCOPSConfig(PPOLagConfig):
     """Config for :class:`lac_rllib.algorithms.focops.algorithm.FOCOPS`; fields: :class:`FOCOPSParams`."""
 
-    PARAMS, FIELDS, PRESETS = FOCOPSParams, FIELDS, PRESETS
+    ALGO = "focops"
+    PARAMS, FIELDS, PRESETS = FOCOPSParams, fields.FieldSet(FOCOPSParams, "FOCOPS"), PRESETS
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.TRUST_REGION_FRACTION)
     ALGORITHM_CLASS = "lac_rllib.algorithms.focops.algorithm.FOCOPS"
     LEARNER_CLASS = "lac_rllib.algorithms.focops.learner.FOCOPSTorchLearner"
-
-
-#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
-#: is its house's (registry.declared).
-CONFIG_CLASS, PARAMS = FOCOPSConfig, FOCOPSParams

@@ -203,11 +203,31 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-#: LAC's fields and what each accepts (the interface every algorithm's config module has:
-#: lac_rllib/algorithms/registry.py).
+#: LAC's fields and what each accepts.
 FIELDS = fields.FieldSet(LACParams, "LAC")
-FIELD_RANGES, FIELD_NAMES = FIELDS.ranges, FIELDS.names
-field_docs, check_field, parse_sets = FIELDS.docs, FIELDS.check, FIELDS.parse_sets
+
+
+# A trial this short cannot repay a compile of the fused chain (~15-40 s per process): eager.
+_SMOKE = {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
+          "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1, "langevin_fused": False}
+#: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any other).
+#: quick on the tiny task is the default ablation's (docs/sweeps.md): T = 20, the fused chain (it
+#: pays there: a T = 30 trial runs ~1,400 chains of 30 steps, the compiled kernels cached on disk
+#: across trials) and ten envs per runner (RLlib's per-step machinery took 55% of a one-env trial,
+#: py-spy; ten 100-step episodes still complete in every 1,000-step iteration). On the paper's
+#: tasks quick is a machinery check: 64-wide nets, one env so 2k-step iterations complete
+#: 1000-step episodes.
+LAC_BUDGET_FIELDS = {
+    "smoke": {"*": _SMOKE},
+    "quick": {"tiny": {"langevin_steps": 20, "langevin_fused": True, "num_envs_per_env_runner": 10},
+              "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
+                    "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                    "num_envs_per_env_runner": 1, "langevin_fused": False}},
+}
+#: The chain's seconds per env step and per Langevin step on one CPU, per preset (the plan's
+#: estimate; calibration: docs/sweeps.md).
+CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
+
 
 
 class LACConfig(OffPolicyConfig, AlgorithmConfig):
@@ -217,7 +237,13 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
     task's preset (docs/spec.md §5, Tables 4-5); explicit ``training(...)`` values win over presets.
     """
 
+    ALGO = "lac"
     PARAMS, FIELDS, PRESETS = LACParams, FIELDS, PRESETS
+    #: What ``lac-eval --actions`` accepts for a LAC policy: the generator's mean, a draw from it,
+    #: or Algorithm 1's chain.
+    ACTIONS = ("generator", "stochastic", "langevin")
+    SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
+    BUDGET_FIELDS = LAC_BUDGET_FIELDS
     #: Table 5 sets T = 50 Langevin steps on the Button1 tasks; we apply it to the whole Button
     #: family (levels 0-2, TaskSpec.family), whose goal (press the one right button) is the same.
     TASK_FAMILY_OVERRIDES = {"Button": {"langevin_steps": 50}}
@@ -241,10 +267,6 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
         matmuls, else float32 (lac_rllib.constrained.precision.resolve_dtype)."""
         return {"langevin_dtype": resolve_dtype(self.langevin_dtype)}
 
-    def lac_params(self) -> dict[str, Any]:
-        """The LAC fields as a plain dict (for run metadata and the RLModule): ``params()``."""
-        return self.params()
-
     # ----- RLlib hooks -----
     @override(AlgorithmConfig)
     def validate(self) -> None:
@@ -267,67 +289,27 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
         """The env steps the linear decay runs over: lr_decay_horizon, else the run's budget."""
         return int(self.lr_decay_horizon if self.lr_decay_horizon is not None else self.total_env_steps)
 
+    @classmethod
+    def benchmark_fields(cls, benchmark: str, steps: int) -> dict:
+        """What iteration.py times LAC with: no random phase and no actor delay, so that every timed
+        iteration is a training one."""
+        return {"random_iterations": 0, "actor_update_start_iteration": 0} if benchmark == "iteration" else {}
+
+    @classmethod
+    def plan_update_s(cls, params: dict, preset: str) -> float:
+        """Update seconds per env step on one CPU beyond sampling (the plan's estimate): the chain's
+        share, which grows with T."""
+        return CHAIN_S_PER_STEP.get(preset, 0.0) * params["langevin_steps"]
+
+    @classmethod
+    def multiplier_warmup(cls, params: dict) -> int:
+        """The random iterations and those before the first actor update, then one iteration: before
+        it ν's steps cannot reach the actor's actions (early stopping waits for them)."""
+        start = max(int(params["random_iterations"]), int(params["actor_update_start_iteration"]))
+        return (start + 1) * int(params["env_steps_per_iteration"])
+
     @property
     @override(AlgorithmConfig)
     def _model_config_auto_includes(self) -> dict[str, Any]:
         # The module needs the network sizes and the chain's settings (it runs the chain).
-        return {**super()._model_config_auto_includes, **self.lac_params()}
-
-
-CONFIG_CLASS, PARAMS = LACConfig, LACParams
-#: What ``lac-eval --actions`` accepts for a LAC policy: the generator's mean, or Algorithm 1's chain.
-ACTIONS = ("generator", "langevin")
-
-#: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
-SPEED_FIELDS = frozenset({"langevin_fused", "num_envs_per_env_runner", "torch_threads"})
-
-# A trial this short cannot repay a compile of the fused chain (~15-40 s per process): eager.
-_SMOKE = {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_iterations": 1,
-          "actor_hidden": (32, 32), "critic_hidden": (32, 32), "num_envs_per_env_runner": 1, "langevin_fused": False}
-#: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any other).
-#: quick on the tiny task is the default ablation's (docs/sweeps.md): T = 20, the fused chain (it
-#: pays there: a T = 30 trial runs ~1,400 chains of 30 steps, the compiled kernels cached on disk
-#: across trials) and ten envs per runner (RLlib's per-step machinery took 55% of a one-env trial,
-#: py-spy; ten 100-step episodes still complete in every 1,000-step iteration). On the paper's
-#: tasks quick is a machinery check: 64-wide nets, one env so 2k-step iterations complete
-#: 1000-step episodes.
-BUDGET_FIELDS = {
-    "smoke": {"*": _SMOKE},
-    "quick": {"tiny": {"langevin_steps": 20, "langevin_fused": True, "num_envs_per_env_runner": 10},
-              "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000, "random_iterations": 1,
-                    "gradient_passes": 0.5, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
-                    "num_envs_per_env_runner": 1, "langevin_fused": False}},
-}
-#: The chain's seconds per env step and per Langevin step on one CPU, per preset (the plan's
-#: estimate; calibration: docs/sweeps.md).
-CHAIN_S_PER_STEP = {"tiny": 4.1e-5, "safety_gym": 1.37e-4, "mujoco": 5.3e-4}
-
-
-
-def benchmark_fields(benchmark: str, steps: int) -> dict:
-    """What iteration.py times LAC with: no random phase and no actor delay, so that every timed
-    iteration is a training one."""
-    return {"random_iterations": 0, "actor_update_start_iteration": 0} if benchmark == "iteration" else {}
-
-
-def plan_update_s(params: dict, preset: str) -> float:
-    """Update seconds per env step on one CPU beyond sampling (the plan's estimate): the chain's
-    share, which grows with T."""
-    return CHAIN_S_PER_STEP.get(preset, 0.0) * params["langevin_steps"]
-
-
-
-def warmup_env_steps(params: dict) -> int:
-    """The random iterations and those before the first actor update, then one iteration: before
-    it ν's steps cannot reach the actor's actions (early stopping waits for them)."""
-    start = max(int(params["random_iterations"]), int(params["actor_update_start_iteration"]))
-    return (start + 1) * int(params["env_steps_per_iteration"])
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> LACConfig:
-    """The LACConfig a run of ``timesteps`` env steps uses (validated; no Ray needed:
-    :meth:`~lac_rllib.constrained.task_config.SafeTaskConfig.build`). The budget is the horizon of
-    the learning-rate decay unless ``sets`` or the preset names another. ``cpus`` > 1 runs the same
-    algorithm on that many CPUs (:func:`use_cpus`)."""
-    return LACConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)
+        return {**super()._model_config_auto_includes, **self.params()}

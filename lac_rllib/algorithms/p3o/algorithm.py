@@ -1,10 +1,10 @@
-"""P3O(PPOLag): PPO-Lag's training step (sample, one learner update, sync) with P3O's learner."""
+"""P3O: the on-policy family's training step (sample, one learner update, sync) with P3O's learner."""
 
 from __future__ import annotations
 
 from lac_rllib.algorithms.p3o.config import P3OConfig
-from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
+from lac_rllib.constrained.on_policy import OnPolicySafeAlgorithm
 
 
-class P3O(PPOLag):
-    ALGO, CONFIG_CLASS = "p3o", P3OConfig
+class P3O(OnPolicySafeAlgorithm):
+    CONFIG_CLASS = P3OConfig

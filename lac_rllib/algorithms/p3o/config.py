@@ -1,4 +1,4 @@
-"""P3OConfig: Penalized Proximal Policy Optimization on PPO-Lag's house.
+"""P3OConfig: Penalized Proximal Policy Optimization on the on-policy base (no multiplier).
 
 P3O replaces the Lagrange multiplier by an exact penalty (Zhang et al. 2022, eq. 9): the policy
 minimises PPO's clipped loss on A^R plus κ·ReLU(mean(r·A^C) + Ĵ_C − b) (learner.py). It has no
@@ -15,10 +15,9 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from lac_rllib.algorithms.ppo_lag import config as ppo_lag
-from lac_rllib.algorithms.ppo_lag.config import OMNISAFE_BUDGET, OnPolicyParams, PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, NON_NEGATIVE, POSITIVE, one_of, or_none, param
+from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyParams
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -44,25 +43,17 @@ class P3OParams(OnPolicyParams):
     """Passes over the iteration's batch (RLlib's field) [O P3O.yaml update_iters 10]."""
 
 
-#: P3O's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(P3OParams, "P3O")
 PRESETS: dict[str, dict[str, Any]] = {
-    # [O] as PPO-Lag's, less its multiplier's values (the tiny preset's faster ν).
-    **{name: {k: v for k, v in values.items() if k in FIELDS.names} for name, values in ppo_lag.PRESETS.items()
-       if name != "ssa"},
+    **ON_POLICY_PRESETS,  # [O] the family's sizes (no multiplier: no faster ν on the tiny task)
     "omnisafe": {"lr_decay_horizon": OMNISAFE_BUDGET},
 }
 
 
-class P3OConfig(PPOLagConfig):
+class P3OConfig(OnPolicyConfig):
     """Config for :class:`lac_rllib.algorithms.p3o.algorithm.P3O`; fields: :class:`P3OParams`."""
 
-    PARAMS, FIELDS, PRESETS = P3OParams, FIELDS, PRESETS
+    ALGO = "p3o"
+    PARAMS, FIELDS, PRESETS = P3OParams, fields.FieldSet(P3OParams, "P3O"), PRESETS
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.COST_PENALTY)
     ALGORITHM_CLASS = "lac_rllib.algorithms.p3o.algorithm.P3O"
     LEARNER_CLASS = "lac_rllib.algorithms.p3o.learner.P3OTorchLearner"
-
-
-#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
-#: is its house's (registry.declared).
-CONFIG_CLASS, PARAMS = P3OConfig, P3OParams

@@ -1,4 +1,4 @@
-"""PCPO(CPO): CPO's training step (PPO-Lag's: sample, one learner update, sync) with PCPO's learner."""
+"""PCPO(CPO): CPO's training step (the on-policy family's: sample, one learner update, sync) with PCPO's learner."""
 
 from __future__ import annotations
 
@@ -7,4 +7,4 @@ from lac_rllib.algorithms.pcpo.config import PCPOConfig
 
 
 class PCPO(CPO):
-    ALGO, CONFIG_CLASS = "pcpo", PCPOConfig
+    CONFIG_CLASS = PCPOConfig

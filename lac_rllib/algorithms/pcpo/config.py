@@ -19,6 +19,7 @@ from lac_rllib.algorithms.cpo import config as cpo
 from lac_rllib.algorithms.cpo.config import CostStepParams, CPOConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
+from lac_rllib.constrained.trust_region_config import OMNISAFE_STEP
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 PROJECTIONS = ("omnisafe", "kl", "l2")
@@ -51,21 +52,14 @@ class PCPOParams(CostStepParams):
 
 PRESETS: dict[str, dict[str, Any]] = {name: dict(values) for name, values in cpo.PRESETS.items() if name != "ssa"}
 # [O]'s KL and CG; PCPO has no dual to set (tests/algorithms/pcpo/test_pcpo_golden.py).
-PRESETS["omnisafe"] = dict(cpo.OMNISAFE_STEP)
-
-#: PCPO's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(PCPOParams, "PCPO")
+PRESETS["omnisafe"] = dict(OMNISAFE_STEP)
 
 
 class PCPOConfig(CPOConfig):
     """Config for :class:`lac_rllib.algorithms.pcpo.algorithm.PCPO`; fields: :class:`PCPOParams`."""
 
-    PARAMS, FIELDS, PRESETS = PCPOParams, FIELDS, PRESETS
+    ALGO = "pcpo"
+    PARAMS, FIELDS, PRESETS = PCPOParams, fields.FieldSet(PCPOParams, "PCPO"), PRESETS
     REPORTED_KEYS = tuple(k for k in CPOConfig.REPORTED_KEYS if k != metrics.CPO_CASE)  # no cases
     ALGORITHM_CLASS = "lac_rllib.algorithms.pcpo.algorithm.PCPO"
     LEARNER_CLASS = "lac_rllib.algorithms.pcpo.learner.PCPOTorchLearner"
-
-
-#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
-#: is its house's (registry.declared).
-CONFIG_CLASS, PARAMS = PCPOConfig, PCPOParams

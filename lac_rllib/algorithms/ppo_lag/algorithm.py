@@ -1,87 +1,10 @@
-"""PPOLag(SafeAlgorithm, PPO): PPO-Lagrangian on RLlib's new API stack.
-
-The MRO is PPOLag → SafeAlgorithm → PPO → Algorithm: SafeAlgorithm's ``setup``, ``get_metadata``
-and ``restore_from_path`` call ``super()``, which PPO does not override, so they wrap
-Algorithm's; PPO contributes its config and training step. The training step is RLlib's PPO
-step (ppo.py, new stack, env-step counting) with two additions: the costs of the episodes
-completed in the batch go to the learner (ν's step, learner.py), and the top-level results
-(episode return and cost, ν, feasibility) are logged. One iteration:
-
-  1. sample ``train_batch_size_per_learner`` env steps with the current policy;
-  2. one ``learner_group.update``: ν's step, then the cost GAE and ``num_epochs`` epochs of
-     minibatches (learner.py);
-  3. the new weights (and ν) to the env runners.
-
-OmniSafe and safety-starter-agents reset their envs every epoch, dropping the episode cut at an
-epoch's end from Ĵ_C; RLlib's episodes run on across iterations (a cut chunk is bootstrapped with
-V(s) at the cut), so every episode counts once, in the iteration it completes.
-"""
+"""PPOLag: the on-policy family's training step (constrained/on_policy.py) with PPO-Lag's config."""
 
 from __future__ import annotations
 
-from ray.rllib.algorithms.ppo.ppo import PPO
-from ray.rllib.core import ALL_MODULES
-from ray.rllib.execution.rollout_ops import synchronous_parallel_sample
-from ray.rllib.utils.annotations import override
-from ray.rllib.utils.metrics import (
-    ENV_RUNNER_RESULTS,
-    ENV_RUNNER_SAMPLING_TIMER,
-    LEARNER_RESULTS,
-    LEARNER_UPDATE_TIMER,
-    NUM_ENV_STEPS_SAMPLED_LIFETIME,
-    NUM_MODULE_STEPS_TRAINED_LIFETIME,
-    SYNCH_WORKER_WEIGHTS_TIMER,
-    TIMERS,
-)
-
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
-from lac_rllib.constrained.algorithm import SafeAlgorithm
-from lac_rllib.constrained.costs import completed_episode_stats
-from lac_rllib.constrained.metrics import TS_ITERATION
-from lac_rllib.constrained.minibatch_loop import update_kwargs
+from lac_rllib.constrained.on_policy import OnPolicySafeAlgorithm
 
 
-class PPOLag(SafeAlgorithm, PPO):
-    ALGO, CONFIG_CLASS = "ppo_lag", PPOLagConfig
-
-    @override(PPO)
-    def training_step(self) -> None:
-        cfg = self.config
-        with self.metrics.log_time((TIMERS, ENV_RUNNER_SAMPLING_TIMER)):
-            episodes, runner_results = synchronous_parallel_sample(
-                worker_set=self.env_runner_group, max_env_steps=cfg.total_train_batch_size,
-                sample_timeout_s=cfg.sample_timeout_s, _uses_new_env_runners=True, _return_metrics=True)
-            if not episodes:  # every env runner failed
-                return
-            self.metrics.aggregate(runner_results, key=ENV_RUNNER_RESULTS)
-        # Before the update: the learner connector extends every chunk by a phantom step and marks
-        # it truncated, so afterwards every chunk would look complete.
-        returns, costs = completed_episode_stats(episodes)
-
-        # minibatch_size None: full-batch epochs (RLlib then cycles minibatches of the batch's env
-        # steps; the fused loop takes plans of a set size only).
-        loop = cfg.update_path if cfg.minibatch_size else "rllib"
-        passes = update_kwargs(loop, minibatch_size=cfg.minibatch_size, num_epochs=cfg.num_epochs,
-                               shuffle=cfg.shuffle_batch_per_epoch)
-        with self.metrics.log_time((TIMERS, LEARNER_UPDATE_TIMER)):
-            learner_results = self.learner_group.update(
-                episodes=episodes,
-                timesteps={
-                    **passes.pop("timesteps"),
-                    NUM_ENV_STEPS_SAMPLED_LIFETIME: self.metrics.peek((ENV_RUNNER_RESULTS,
-                                                                       NUM_ENV_STEPS_SAMPLED_LIFETIME)),
-                    NUM_MODULE_STEPS_TRAINED_LIFETIME: self.metrics.peek(
-                        (LEARNER_RESULTS, ALL_MODULES, NUM_MODULE_STEPS_TRAINED_LIFETIME), default=0),
-                    TS_EPISODE_COSTS: costs,
-                    TS_ITERATION: self.iteration,
-                },
-                **passes,
-            )
-            self.metrics.aggregate(learner_results, key=LEARNER_RESULTS)
-
-        with self.metrics.log_time((TIMERS, SYNCH_WORKER_WEIGHTS_TIMER)):
-            self.env_runner_group.sync_weights(from_worker_or_learner_group=self.learner_group,
-                                               policies=set(learner_results[0].keys()) - {ALL_MODULES},
-                                               inference_only=True)
-        self.log_top_level(returns, costs)
+class PPOLag(OnPolicySafeAlgorithm):
+    CONFIG_CLASS = PPOLagConfig

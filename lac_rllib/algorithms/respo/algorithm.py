@@ -7,4 +7,4 @@ from lac_rllib.algorithms.respo.config import RESPOConfig
 
 
 class RESPO(PPOLag):
-    ALGO, CONFIG_CLASS = "respo", RESPOConfig
+    CONFIG_CLASS = RESPOConfig

@@ -1,4 +1,4 @@
-"""RESPOConfig: Reachability Estimation for Safe Policy Optimization on PPO-Lag's house.
+"""RESPOConfig: Reachability Estimation for Safe Policy Optimization = PPO-Lag + a reach critic.
 
 RESPO (Ganai et al. 2023) is PPO-L with a third critic, V_p(s) ∈ (0, 1), the discounted
 probability that the policy reaches a state of positive cost from s (module.py, reachability.py).
@@ -18,13 +18,7 @@ import dataclasses
 import math
 from typing import Any
 
-from lac_rllib.algorithms.ppo_lag import config as ppo_lag
-from lac_rllib.algorithms.ppo_lag.config import (
-    ACTIVATIONS,
-    NU_PARAMETRIZATIONS,
-    OnPolicyLagParams,
-    PPOLagConfig,
-)
+from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import (
     BOOL,
@@ -38,6 +32,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.on_policy_config import ACTIVATIONS, NU_PARAMETRIZATIONS, OnPolicyLagParams
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny")
 P_INIT = 0.25  # [G] penalty_param = 0.25, ν = softplus(p)
@@ -138,18 +133,26 @@ PRESETS: dict[str, dict[str, Any]] = {
              "hidden": (64, 64), "target_kl": 0.02},
 }
 
-#: RESPO's fields and what each accepts (lac_rllib/algorithms/registry.py).
-FIELDS = fields.FieldSet(RESPOParams, "RESPO")
-
 
 class RESPOConfig(PPOLagConfig):
     """Config for :class:`lac_rllib.algorithms.respo.algorithm.RESPO`; fields: :class:`RESPOParams`."""
 
-    PARAMS, FIELDS, PRESETS = RESPOParams, FIELDS, PRESETS
+    ALGO = "respo"
+    PARAMS, FIELDS, PRESETS = RESPOParams, fields.FieldSet(RESPOParams, "RESPO"), PRESETS
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.REACH_VF_LOSS, metrics.REACH_PROB_MEAN)
     ALGORITHM_CLASS = "lac_rllib.algorithms.respo.algorithm.RESPO"
     RL_MODULE_CLASS = "lac_rllib.algorithms.respo.module.RESPOTorchRLModule"
     LEARNER_CLASS = "lac_rllib.algorithms.respo.learner.RESPOTorchLearner"
+
+    @classmethod
+    def benchmark_fields(cls, benchmark: str, steps: int) -> dict:
+        """update_step.py at PPO-Lag's shapes (64-row minibatches of (64, 64) networks, 40 epochs, its
+        KL stop off), so its gradient step is timed against its house's on the same work;
+        iteration.py at its preset."""
+        if benchmark != "update_step":
+            return {}
+        return {**PPOLagConfig.benchmark_fields(benchmark, steps), "minibatch_size": 64, "num_epochs": 40,
+                "hidden": (64, 64)}
 
     def lr_or_schedule(self, lr: float):
         """A critic's (or ν's) lr as RLlib's ``lr_or_lr_schedule``: decaying as the policy's when
@@ -164,17 +167,3 @@ class RESPOConfig(PPOLagConfig):
         if self.multiplier_cost_limit is not None:
             return float(self.multiplier_cost_limit)
         return self.effective_cost_limit
-
-
-#: The registry's names; what else it reads (SPEED_FIELDS, ACTIONS, BUDGET_FIELDS, build_config, ...)
-#: is its house's (registry.declared).
-CONFIG_CLASS, PARAMS = RESPOConfig, RESPOParams
-
-
-def benchmark_fields(benchmark: str, steps: int) -> dict:
-    """What the speed benchmarks build RESPO with: update_step.py at PPO-Lag's shapes (64-row
-    minibatches of (64, 64) networks, 40 epochs, its KL stop off), so its gradient step is timed
-    against its house's on the same work; iteration.py at its preset."""
-    if benchmark != "update_step":
-        return {}
-    return {**ppo_lag.benchmark_fields(benchmark, steps), "minibatch_size": 64, "num_epochs": 40, "hidden": (64, 64)}

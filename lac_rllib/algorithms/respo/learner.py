@@ -30,12 +30,12 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
-from lac_rllib.algorithms.ppo_lag.learner import COST_CRITIC, CRITIC, POLICY, PPOLagTorchLearner
+from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
 from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, ReachTargets
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.lagrange import LagrangeMultiplier
 from lac_rllib.constrained.metrics import NU, REACH_PROB_MEAN, REACH_VF_LOSS
-from lac_rllib.constrained.optim import ForeachAdam
+from lac_rllib.constrained.on_policy_learner import COST_CRITIC, CRITIC, POLICY
 
 REACH_CRITIC = "reach_critic"  # the 4th optimizer's name
 
@@ -62,8 +62,8 @@ class ReachWeightedMultiplier(LagrangeMultiplier):
 
 
 def set_rule_lr(rule, lr: float) -> None:
-    """The learning rate of a step rule: PPO-Lag's AdamStep and GradientStep have ``lr``, its
-    SoftplusAdamStep an ``adam`` that has."""
+    """The learning rate of a step rule: AdamStep and GradientStep have ``lr``, SoftplusAdamStep an
+    ``adam`` that has (constrained/lagrange.py)."""
     getattr(rule, "adam", rule).lr = float(lr)
 
 
@@ -73,11 +73,14 @@ class RESPOTorchLearner(PPOLagTorchLearner):
 
     @override(PPOLagTorchLearner)
     def build(self) -> None:
-        super().build()
         self.reachability = ReachTargets(gamma=self.config.reach_gamma)
-        if self._learner_connector is not None and self.config.add_default_connectors_to_learner_pipeline:
-            self._learner_connector.append(self.reachability)  # after CostGAE: the phantom rows' costs are 0
+        super().build()
         self.nu_due: set[str] = set()
+
+    @override(PPOLagTorchLearner)
+    def learner_pieces(self) -> list:
+        """PPO-Lag's, then the reach targets, after the cost GAE: the phantom rows' costs are 0 there."""
+        return [*super().learner_pieces(), ("append", self.reachability)]
 
     @override(PPOLagTorchLearner)
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
@@ -87,19 +90,14 @@ class RESPOTorchLearner(PPOLagTorchLearner):
                                        bound=base.bound, bounded=base.bounded)
 
     @override(PPOLagTorchLearner)
-    def configure_optimizers_for_module(self, module_id, config=None) -> None:
-        module = self.module[module_id].unwrapped()
-        networks = {
-            POLICY: ([module.encoder.actor_encoder, module.pi], config.policy_lr_or_schedule()),
-            CRITIC: ([module.encoder.critic_encoder, module.vf], config.lr_or_schedule(config.critic_lr)),
-            COST_CRITIC: ([module.cost_vf], config.lr_or_schedule(config.critic_lr)),
-            REACH_CRITIC: ([module.reach_vf], config.lr_or_schedule(config.reach_critic_lr)),
-        }
-        adam = ForeachAdam if config.update_path == "fused" else torch.optim.Adam  # the same steps
-        for name, (parts, lr) in networks.items():
-            params = [p for part in parts for p in self.get_parameters(part)]
-            self.register_optimizer(module_id=module_id, optimizer_name=name, optimizer=adam(params),
-                                    params=params, lr_or_lr_schedule=lr)
+    def optimizer_groups(self, module, config) -> dict:
+        """PPO-Lag's networks, the critics' lr decaying with the policy's (``decay_every_lr`` [G]),
+        and V_p's Adam at ``reach_critic_lr`` [G pvf_optimizer]."""
+        groups = super().optimizer_groups(module, config)
+        for name in (CRITIC, COST_CRITIC):
+            parts, lr = groups[name]
+            groups[name] = (parts, config.lr_or_schedule(lr))
+        return {**groups, REACH_CRITIC: ([module.reach_vf], config.lr_or_schedule(config.reach_critic_lr))}
 
     # ----- ν: J_C before the update, its step at the update's first loss call -----
     @override(PPOLagTorchLearner)
@@ -151,9 +149,3 @@ class RESPOTorchLearner(PPOLagTorchLearner):
         if self.reports_minibatch:
             self.metrics.log_value((module_id, REACH_VF_LOSS), reach_loss.detach(), window=1)
         return loss + reach_loss
-
-    @override(PPOLagTorchLearner)
-    def stopped_optimizers(self, module_id) -> tuple[str, ...]:
-        """The reach critic stops with the other critics (``kl_stop_critics``)."""
-        stopped = super().stopped_optimizers(module_id)
-        return (*stopped, REACH_CRITIC) if CRITIC in stopped else stopped

@@ -1,4 +1,4 @@
-"""RESPOTorchRLModule: PPO-Lag's module (π, V_R, V_C, ν) plus the reach critic V_p.
+"""RESPOTorchRLModule: the on-policy module (π, V_R, V_C, ν) plus the reach critic V_p.
 
 ``reach_vf`` is V_p(s) ∈ (0, 1), the estimated (discounted) probability that the policy reaches a
 state of positive cost from s: an MLP of the other critics' shape with a sigmoid head [G
@@ -14,7 +14,7 @@ import torch
 from ray.rllib.core.columns import Columns
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.algorithms.ppo_lag.module import CostCritic, PPOLagTorchRLModule
+from lac_rllib.constrained.on_policy_module import CostCritic, OnPolicyTorchRLModule
 
 
 class ReachCritic(CostCritic):
@@ -24,8 +24,8 @@ class ReachCritic(CostCritic):
         return torch.sigmoid(super().forward(obs))
 
 
-class RESPOTorchRLModule(PPOLagTorchRLModule):
-    @override(PPOLagTorchRLModule)
+class RESPOTorchRLModule(OnPolicyTorchRLModule):
+    @override(OnPolicyTorchRLModule)
     def setup(self):
         super().setup()
         self.reach_vf = ReachCritic(self.catalog)  # deleted again on env runners (inference-only)
@@ -34,6 +34,6 @@ class RESPOTorchRLModule(PPOLagTorchRLModule):
         """V_p(s) of every row of ``batch`` (B,)."""
         return self.reach_vf(batch[Columns.OBS])
 
-    @override(PPOLagTorchRLModule)
+    @override(OnPolicyTorchRLModule)
     def get_non_inference_attributes(self) -> list[str]:
         return [*super().get_non_inference_attributes(), "reach_vf"]

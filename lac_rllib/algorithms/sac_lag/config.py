@@ -192,7 +192,40 @@ class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
     :class:`SACLagParams`'. ``SACLagConfig().task(id)`` sets the env, its cost convention and the
     task's preset; explicit ``training(...)`` values win over the preset."""
 
+    ALGO = "sac_lag"
     PARAMS, FIELDS, PRESETS = SACLagParams, FIELDS, PRESETS
+    #: What ``lac-eval --actions`` accepts: squash(μ(s)) (module.deterministic_action), or a draw from π.
+    ACTIONS = ("generator", "stochastic")
+    SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads", "update_path"})
+    #: smoke at LAC's smoke sizes; quick on the paper's tasks 64-wide nets, one env, 2k-step
+    #: iterations as LAC's (on the tiny task its own tiny preset is the quick budget).
+    BUDGET_FIELDS = {
+        "smoke": {"*": {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_env_steps": 500,
+                        "warmup_env_steps": 500, "actor_hidden": (32, 32), "critic_hidden": (32, 32),
+                        "num_envs_per_env_runner": 1}},
+        "quick": {"tiny": {}, "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000,
+                                    "random_env_steps": 2_000, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
+                                    "num_envs_per_env_runner": 1}},
+    }
+
+    @classmethod
+    def benchmark_fields(cls, benchmark: str, steps: int) -> dict:
+        """update_step.py: 2,000 random env steps and then iterations of ``steps`` (one gradient step
+        each); iteration.py: the random steps within the warm-up of ``steps``."""
+        if benchmark == "update_step":
+            return {"random_env_steps": 2000, "env_steps_per_iteration": steps}
+        return {"random_env_steps": steps // 2}
+
+    @classmethod
+    def plan_update_s(cls, params: dict, preset: str) -> float:
+        """Update seconds per env step on one CPU beyond sampling (the plan's estimate, measured at the
+        tiny sizes): per gradient update, times the updates per env step."""
+        return 2e-3 * params.get("updates_per_env_step", 1.0)
+
+    @classmethod
+    def multiplier_warmup(cls, params: dict) -> int:
+        """λ takes no step before ``warmup_env_steps`` [O] (early stopping waits for it)."""
+        return int(params["warmup_env_steps"])
     REPORTED_KEYS = (metrics.CRITIC_LOSS, metrics.ACTOR_LOSS, metrics.Q_REWARD_MEAN, metrics.Q_COST_MEAN,
                      metrics.COST_WINDOW_MEAN)
     ALGORITHM_CLASS = "lac_rllib.algorithms.sac_lag.algorithm.SACLag"
@@ -239,52 +272,3 @@ class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
     def _model_config_auto_includes(self) -> dict[str, Any]:
         # The module needs the network sizes, the log σ clamp and λ₀.
         return {**super()._model_config_auto_includes, **self.params()}
-
-
-CONFIG_CLASS, PARAMS = SACLagConfig, SACLagParams
-#: What ``lac-eval --actions`` accepts for a SAC-Lag policy: squash(μ(s)) (module.deterministic_action).
-ACTIONS = ("generator",)
-#: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
-SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads", "update_path"})
-#: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS), per task preset ("*": any
-#: other): smoke at LAC's smoke sizes; quick on the paper's tasks 64-wide nets, one env, 2k-step
-#: iterations as LAC's (on the tiny task its own tiny preset is the quick budget).
-BUDGET_FIELDS = {
-    "smoke": {"*": {"env_steps_per_iteration": 500, "replay_capacity": 2_000, "random_env_steps": 500,
-                    "warmup_env_steps": 500, "actor_hidden": (32, 32), "critic_hidden": (32, 32),
-                    "num_envs_per_env_runner": 1}},
-    "quick": {"tiny": {}, "*": {"env_steps_per_iteration": 2_000, "replay_capacity": 10_000,
-                                "random_env_steps": 2_000, "actor_hidden": (64, 64), "critic_hidden": (64, 64),
-                                "num_envs_per_env_runner": 1}},
-}
-
-
-
-def benchmark_fields(benchmark: str, steps: int) -> dict:
-    """What the speed benchmarks build SAC-Lag with: update_step.py, 2,000 random env steps and
-    then iterations of ``steps`` (one gradient step each); iteration.py, the random steps within
-    the warm-up of ``steps``."""
-    if benchmark == "update_step":
-        return {"random_env_steps": 2000, "env_steps_per_iteration": steps}
-    return {"random_env_steps": steps // 2}
-
-
-def plan_update_s(params: dict, preset: str) -> float:
-    """Update seconds per env step on one CPU beyond sampling (the plan's estimate, measured at the
-    tiny sizes): per gradient update, times the updates per env step."""
-    return 2e-3 * params.get("updates_per_env_step", 1.0)
-
-
-def warmup_env_steps(params: dict) -> int:
-    """λ takes no step before ``warmup_env_steps`` [O] (early stopping waits for it)."""
-    return int(params["warmup_env_steps"])
-
-
-def build_config(task: str, seed: int, sets: dict, num_env_runners: int = 0,
-                 timesteps: int | None = None, cpus: int = 1) -> SACLagConfig:
-    """The SACLagConfig of a run on ``task`` (validated; no Ray needed:
-    :meth:`~lac_rllib.constrained.task_config.SafeTaskConfig.build`). ``timesteps`` is accepted for
-    the common interface; SAC-Lag has no schedule over the budget [O: constant learning rates], so
-    it changes nothing. ``cpus`` > 1 samples with that many env runners and updates with that many
-    torch threads (:func:`~lac_rllib.constrained.cpus.use_cpus`)."""
-    return SACLagConfig.build(task, seed, sets, num_env_runners, timesteps, cpus)

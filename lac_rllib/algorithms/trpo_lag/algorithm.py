@@ -1,12 +1,12 @@
-"""TRPOLag(PPOLag): PPO-Lag's training step (sample, one learner update, sync) with the trust-region
-learner: the update call's critic minibatches are the config's (minibatch_size, num_epochs), the
-policy's one step happens inside it (learner.py)."""
+"""TRPOLag: the on-policy family's training step (constrained/on_policy.py: sample, one learner
+update, sync) with the trust-region learner: the update call's critic minibatches are the
+config's (minibatch_size, num_epochs), the policy's one step happens inside it (learner.py)."""
 
 from __future__ import annotations
 
-from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
 from lac_rllib.algorithms.trpo_lag.config import TRPOLagConfig
+from lac_rllib.constrained.on_policy import OnPolicySafeAlgorithm
 
 
-class TRPOLag(PPOLag):
-    ALGO, CONFIG_CLASS = "trpo_lag", TRPOLagConfig
+class TRPOLag(OnPolicySafeAlgorithm):
+    CONFIG_CLASS = TRPOLagConfig

@@ -14,8 +14,7 @@ from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
 from lac_rllib.algorithms.cpo import config as C
 from lac_rllib.algorithms.cpo import learner as L
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
-from lac_rllib.constrained.metrics import COST_GAP, CPO_CASE, LINE_SEARCH_FRACTION, NU
+from lac_rllib.constrained.metrics import COST_GAP, CPO_CASE, LINE_SEARCH_FRACTION, NU, TS_EPISODE_COSTS
 from lac_rllib.tasks import get_task
 
 TASK = "lac/PointHazard-v0"  # cost limit 2, action (2,)
@@ -23,16 +22,16 @@ DELTA = 0.02  # target_kl 0.01 per action dimension
 
 
 def test_defaults_are_omnisafes_and_the_ssa_preset_scales_the_gap():
-    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CPOConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.target_kl, config.cg_iters, config.backtrack_iters, config.cost_gap_scale,
             config.dual_convention, config.critic_lr, config.num_epochs, config.minibatch_size) == \
         (0.01, 15, 20, "none", "paper", 1e-3, 10, 128)
-    assert not {"nu_init", "lagrangian_lr"} & C.FIELDS.names  # no multiplier
-    ssa = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
+    assert not {"nu_init", "lagrangian_lr"} & C.CPOConfig.FIELDS.names  # no multiplier
+    ssa = C.CPOConfig.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
     assert (ssa.cost_gap_scale, ssa.cost_window, ssa.backtrack_iters, ssa.cg_iters, ssa.max_kl(2)) == \
         ("episode_length", None, 10, 10, 0.01)
-    docs = C.FIELDS.docs()
-    assert set(docs) == C.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
+    docs = C.CPOConfig.FIELDS.docs()
+    assert set(docs) == C.CPOConfig.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
 
 
 def make(**fields):
@@ -61,14 +60,14 @@ def step_at(setup, monkeypatch, cost_gap: float):
     lrn, state, episodes = setup
     lrn.set_state(state)
     seen = {}
-    cpo_step, search = L.cpo_step, L.TRPOLagTorchLearner.search
+    cpo_step, search = L.cpo_step, L.TrustRegionTorchLearner.search
 
     def spy_step(g, b, x, p, c, max_kl, **kwargs):
         seen.update(g=g, b=b, x=x, p=p, c=c, out=cpo_step(g, b, x, p, c, max_kl, **kwargs))
         return seen["out"]
 
     monkeypatch.setattr(L, "cpo_step", spy_step)
-    monkeypatch.setattr(L.TRPOLagTorchLearner, "search",
+    monkeypatch.setattr(L.TrustRegionTorchLearner, "search",
                         lambda self, policy, step, *a: seen.update(step=step) or search(self, policy, step, *a))
     results = lrn.update(episodes=copy.deepcopy(episodes), timesteps={TS_EPISODE_COSTS: [2.0 + cost_gap]},
                          minibatch_size=100, num_epochs=1)

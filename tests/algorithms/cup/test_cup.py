@@ -15,9 +15,9 @@ from lac_rllib.algorithms.cup import config as C
 from lac_rllib.algorithms.cup import learner as cup_learner
 from lac_rllib.algorithms.cup.row_index import ROW_INDEX
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
 from lac_rllib.constrained import metrics
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
+from lac_rllib.constrained.metrics import TS_EPISODE_COSTS
 from lac_rllib.constrained.minibatch_loop import update_kwargs
 from lac_rllib.constrained.projection import kl_to_reference
 from lac_rllib.tasks import get_task
@@ -28,16 +28,16 @@ PATHS = ["rllib", "fused"]
 
 
 def test_defaults_are_cup_yaml():
-    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.CUPConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.target_kl, config.nu_max, config.nu_init, config.lagrangian_lr, config.clip_param) == \
         (0.01, 2.0, 0.001, 0.035, 0.2)
     assert (config.num_epochs, config.stage2_epochs, config.minibatch_size) == (40, 40, 64)  # update_iters both
-    tiny = C.CONFIG_CLASS.build("lac/PointHazard-v0", 0, {"projection_epochs": 3}, timesteps=1000)
+    tiny = C.CUPConfig.build("lac/PointHazard-v0", 0, {"projection_epochs": 3}, timesteps=1000)
     assert (tiny.stage2_epochs, tiny.num_epochs, tiny.target_kl) == (3, 10, 0.02)  # the tiny preset's KL stop
     assert set(C.PRESETS) == set(C.PRESET_NAMES) == {"mujoco", "safety_gym", "tiny", "omnisafe"}
     assert {metrics.PROJECTION_LOSS, metrics.PROJECTION_EPOCHS, metrics.PROJECTION_KL} <= set(C.CUPConfig.REPORTED_KEYS)
-    docs = C.FIELDS.docs()
-    assert set(docs) == C.FIELDS.names and all(docs.values())
+    docs = C.CUPConfig.FIELDS.docs()
+    assert set(docs) == C.CUPConfig.FIELDS.names and all(docs.values())
 
 
 # ----- a Learner in this process -----
@@ -182,9 +182,9 @@ def test_nu_does_not_enter_stage_one(switch, path):
 def test_cup_trains_and_reports_its_keys(ray_session, minibatch_size):
     sets = {"train_batch_size_per_learner": 400, "minibatch_size": minibatch_size, "num_epochs": 2,
             "num_envs_per_env_runner": 4, "hidden": (32, 32)}
-    algo = C.CONFIG_CLASS.build("lac/PointHazard-v0", 0, sets, timesteps=20_000).build_algo()
+    algo = C.CUPConfig.build("lac/PointHazard-v0", 0, sets, timesteps=20_000).build_algo()
     try:
-        assert type(algo).ALGO == "cup"
+        assert algo.config.ALGO == "cup"
         for _ in range(2):
             result = algo.train()
     finally:

@@ -385,13 +385,13 @@ def test_two_cpus_hold_the_same_episodes_and_repeat_exactly(ray_session):
 
 
 def test_cpus_must_split_the_envs_evenly():
-    from lac_rllib.algorithms.lac.config import build_config
+    from lac_rllib.algorithms.lac.config import LACConfig
 
     with pytest.raises(ValueError, match=r"--cpus 3 is invalid with num_envs_per_env_runner=10.*accepted: 1, 2, 5, 10"):
-        build_config("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=3)
+        LACConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=3)
     with pytest.raises(ValueError, match=r"--cpus 0 is invalid"):
-        build_config("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=0)
-    config = build_config("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=2)
+        LACConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=0)
+    config = LACConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=1000, cpus=2)
     assert (config.num_env_runners, config.num_envs_per_env_runner, config.torch_threads) == (2, 5, 2)
     # Sampling and updating take turns: the driver's CPU and half a CPU per runner make the run's 2.
     assert config.num_cpus_per_env_runner == 0.5

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from lac_rllib.algorithms.lac.config import FIELD_NAMES, FIELD_RANGES, LACConfig, LACParams, check_field, field_docs
+from lac_rllib.algorithms.lac.config import FIELDS, LACConfig, LACParams
 
 
 @pytest.mark.parametrize("field,value,accepted", [
@@ -75,21 +75,21 @@ def test_spec_defaults_and_presets():
         c = LACConfig().task(task)
         assert (c.num_envs_per_env_runner, c.langevin_fused, c.langevin_dtype) == (envs, fused, dtype)
         assert c.env_steps_per_iteration % (envs * 1000) == 0 or task == "lac/PointHazard-v0"
-        assert c.lac_params()["num_envs_per_env_runner"] == envs
+        assert c.params()["num_envs_per_env_runner"] == envs
     # explicit values win over the preset
     assert LACConfig().task("SafetyPointGoal1-v0").training(env_steps_per_iteration=7).env_steps_per_iteration == 7
 
 
 def test_every_field_has_a_docstring():
-    docs = field_docs()
-    assert set(docs) == FIELD_NAMES == {f for f in LACParams.__dataclass_fields__}
+    docs = FIELDS.docs()
+    assert set(docs) == FIELDS.names == {f for f in LACParams.__dataclass_fields__}
     assert all(len(d) > 10 for d in docs.values())
 
 
 def test_every_field_declares_the_values_it_accepts_and_its_default_is_one():
-    assert set(FIELD_RANGES) == FIELD_NAMES
+    assert set(FIELDS.ranges) == FIELDS.names
     for f in dataclasses.fields(LACParams):
-        check_field(f.name, f.default)
+        FIELDS.check(f.name, f.default)
 
 
 def test_task_convention_feeds_cost_limit_and_discount():

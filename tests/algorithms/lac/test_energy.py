@@ -109,7 +109,7 @@ def test_auto_dtype_is_bfloat16_only_with_native_bf16_matmuls(monkeypatch):
     from lac_rllib.algorithms.lac.module import chain_settings
     from lac_rllib.constrained import precision
 
-    cfg = {**LACConfig().training(langevin_dtype="auto").lac_params()}
+    cfg = {**LACConfig().training(langevin_dtype="auto").params()}
     space = gym.spaces.Box(-1.0, 1.0, (2,))
     for flags, expected in (({"avx2", "avx512f"}, "float32"), ({"avx2", "avx512_bf16"}, "bfloat16"),
                             ({"amx_bf16"}, "bfloat16"), (set(), "float32")):

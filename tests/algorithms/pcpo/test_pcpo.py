@@ -15,21 +15,20 @@ from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
 from lac_rllib.algorithms.pcpo import config as C
 from lac_rllib.algorithms.pcpo import learner as L
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
-from lac_rllib.constrained.metrics import COST_GAP, NU
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
+from lac_rllib.constrained.metrics import COST_GAP, NU, TS_EPISODE_COSTS
 from lac_rllib.tasks import get_task
 
 TASK = "lac/PointHazard-v0"  # cost limit 2, action (2,)
 
 
 def test_defaults_are_omnisafes():
-    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.PCPOConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.projection, config.backtrack_iters, config.target_kl, config.cg_iters, config.cost_gap_scale) == \
         ("omnisafe", 200, 0.01, 15, "none")
     assert "cpo_case" not in C.PCPOConfig.REPORTED_KEYS
-    docs = C.FIELDS.docs()
-    assert set(docs) == C.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
+    docs = C.PCPOConfig.FIELDS.docs()
+    assert set(docs) == C.PCPOConfig.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
 
 
 def update(monkeypatch, cost_gap: float):

@@ -15,18 +15,11 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.algorithms import registry
 from lac_rllib.algorithms.ppo_lag import config as C
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, cost_gae
-from lac_rllib.algorithms.ppo_lag.learner import (
-    COST_CRITIC,
-    CRITIC,
-    EPOCHS_TRAINED,
-    POLICY,
-    TS_EPISODE_COSTS,
-    SoftplusAdamStep,
-)
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, cost_gae
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier
-from lac_rllib.constrained.metrics import NU
+from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier, SoftplusAdamStep
+from lac_rllib.constrained.metrics import EPOCHS_TRAINED, NU, TS_EPISODE_COSTS
+from lac_rllib.constrained.on_policy_learner import COST_CRITIC, CRITIC, POLICY
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"  # obs (1,), action (1,); the episodes below are built by hand
@@ -35,7 +28,7 @@ GAMMA_C, LAMBDA = 0.9, 0.8
 
 # ----- config -----
 def test_defaults_are_omnisafe_and_rllib_defaults_that_break_it_are_overridden():
-    config = C.build_config("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.PPOLagConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert config.vf_clip_param == math.inf  # RLlib's 10 clamps the squared error of cost values
     assert (config.lr, config.clip_param, config.lambda_, config.use_kl_loss, config.entropy_coeff) == \
         (3e-4, 0.2, 0.95, False, 0.0)
@@ -48,17 +41,17 @@ def test_defaults_are_omnisafe_and_rllib_defaults_that_break_it_are_overridden()
     assert config.preset == "safety_gym" and config.num_envs_per_env_runner == 10
     # the policy's lr decays over OmniSafe's 1e7-step benchmark, not over this run's 100k
     assert config.policy_lr_or_schedule() == [[0, 3e-4], [10_000_000, 0.0]]
-    tiny = C.build_config("lac/PointHazard-v0", 0, {}, timesteps=40_000)  # no preset horizon: its own budget
+    tiny = C.PPOLagConfig.build("lac/PointHazard-v0", 0, {}, timesteps=40_000)  # no preset horizon: its own budget
     assert tiny.policy_lr_or_schedule() == [[0, 1e-3], [40_000, 0.0]]
 
 
 def test_presets_apply_and_explicit_values_win():
-    tiny = C.build_config("lac/PointHazard-v0", 0, {"lr": 5e-4}, timesteps=1000)
+    tiny = C.PPOLagConfig.build("lac/PointHazard-v0", 0, {"lr": 5e-4}, timesteps=1000)
     for name, value in C.PRESETS["tiny"].items():
         assert getattr(tiny, name) == (5e-4 if name == "lr" else value), name
     assert tiny.params()["preset"] == "tiny"
     by_task = C.PPOLagConfig().task("SafetyPointGoal1-v0", preset="ssa")
-    by_field = C.build_config("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=1000)
+    by_field = C.PPOLagConfig.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=1000)
     for config in (by_task, by_field):
         assert config.preset == "ssa"
         for name, value in C.PRESETS["ssa"].items():
@@ -69,15 +62,15 @@ def test_presets_apply_and_explicit_values_win():
     with pytest.raises(ValueError, match=r"PPO-Lag config field num_epochs=0 is invalid; accepted: an integer >= 1"):
         C.PPOLagConfig().training(num_epochs=0)
     with pytest.raises(ValueError, match="total_env_steps=None is invalid"):
-        C.build_config("lac/PointHazard-v0", 0, {})
-    two = C.build_config("lac/PointHazard-v0", 0, {}, timesteps=1000, cpus=2)  # the tiny preset's 10 envs
+        C.PPOLagConfig.build("lac/PointHazard-v0", 0, {})
+    two = C.PPOLagConfig.build("lac/PointHazard-v0", 0, {}, timesteps=1000, cpus=2)  # the tiny preset's 10 envs
     assert (two.num_env_runners, two.num_envs_per_env_runner, two.torch_threads) == (2, 5, 2)
 
 
 def test_the_registry_interface():
     module = registry.algo_config("ppo_lag")
-    assert module.CONFIG_CLASS.PARAMS is module.PARAMS and module.CONFIG_CLASS.FIELDS is module.FIELDS
-    assert set(module.PRESETS) >= {"mujoco", "safety_gym", "tiny"} and module.ACTIONS == ("generator",)
+    assert module is C.PPOLagConfig and module.FIELDS.params_cls is module.PARAMS
+    assert set(module.PRESETS) >= {"mujoco", "safety_gym", "tiny"} and module.ACTIONS == ("generator", "stochastic")
     assert module.SPEED_FIELDS <= module.FIELDS.names
     assert registry.parse_sets("ppo_lag", ["lagrangian_lr=0", "hidden=(32, 32)"]) == \
         {"lagrangian_lr": 0, "hidden": (32, 32)}

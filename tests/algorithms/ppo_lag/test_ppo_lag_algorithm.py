@@ -12,9 +12,18 @@ from ray.rllib.core.rl_module.rl_module import RLModule
 
 from lac_rllib.algorithms.ppo_lag.algorithm import PPOLag
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
-from lac_rllib.algorithms.ppo_lag.learner import COST_CRITIC, CRITIC, POLICY, TS_EPISODE_COSTS, PPOLagTorchLearner
+from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+from lac_rllib.constrained.metrics import (
+    COST_LIMIT,
+    ENV_STEPS,
+    EPISODE_COST,
+    EPISODE_RETURN,
+    FEASIBLE,
+    NU,
+    TS_EPISODE_COSTS,
+)
+from lac_rllib.constrained.on_policy_learner import COST_CRITIC, CRITIC, POLICY
 
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 

@@ -10,7 +10,7 @@ A random policy scores −10.1. The detour around the hazard costs little return
 import pytest
 from conftest import assert_learns_unsafely, assert_learns_within, learning_run
 
-from lac_rllib.algorithms.ppo_lag.config import build_config
+from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 
 # One worker runs this module: its module-scoped fixtures are expensive (pytest-xdist, --dist loadgroup).
 pytestmark = [pytest.mark.xdist_group("ppo_lag_learning"), pytest.mark.slow]
@@ -20,7 +20,7 @@ LIMIT = 2.0
 
 
 def _run(**sets):
-    return learning_run(build_config(TASK, 0, sets, timesteps=STEPS), STEPS, TAIL)
+    return learning_run(PPOLagConfig.build(TASK, 0, sets, timesteps=STEPS), STEPS, TAIL)
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def pinned_run(ray_session):
 
 
 def test_ppo_lag_is_safe_and_learns(lagrangian_run, pinned_run):
-    assert build_config(TASK, 0, {}, timesteps=STEPS).effective_cost_limit == LIMIT
+    assert PPOLagConfig.build(TASK, 0, {}, timesteps=STEPS).effective_cost_limit == LIMIT
     assert_learns_within(lagrangian_run, LIMIT, nu_peak=0.1)
     cost = lagrangian_run[1]
     assert cost < pinned_run[1] - 2.0, f"cost {cost:.2f} not clearly below the pinned run's {pinned_run[1]:.2f}"

@@ -12,11 +12,10 @@ from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.metrics import LEARNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
-from lac_rllib.algorithms.ppo_lag.cost_gae import COST_ADVANTAGES
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
 from lac_rllib.algorithms.respo import config as C
 from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, reach_targets
-from lac_rllib.constrained.metrics import NU, REACH_PROB_MEAN, REACH_VF_LOSS, iteration_row
+from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
+from lac_rllib.constrained.metrics import NU, REACH_PROB_MEAN, REACH_VF_LOSS, TS_EPISODE_COSTS, iteration_row
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"  # obs (1,), action (1,); the episodes below are built by hand
@@ -28,7 +27,7 @@ TRUNCATED = [G**3, G**2, G, 1.0, G**3, G**2, G, 1.0, G**2 * 0.4, G * 0.4]
 
 
 def test_defaults_are_the_authors():
-    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.RESPOConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert config.nu_init == pytest.approx(math.log1p(math.exp(0.25)))  # p₀ = 0.25, ν = softplus(p)
     assert (config.lagrangian_lr, config.nu_parametrization, config.cost_window, config.lr, config.critic_lr,
             config.reach_critic_lr, config.reach_gamma, config.lambda_, config.clip_param) == \
@@ -41,8 +40,8 @@ def test_defaults_are_the_authors():
     assert config.multiplier_limit == 25.0 and config.training(multiplier_cost_limit=0.0).multiplier_limit == 0.0
     assert config.lr_or_schedule(1e-4) == [[0, 1e-4], [C.RESPO_BUDGET, 0.0]]
     assert config.training(decay_every_lr=False).lr_or_schedule(1e-4) == 1e-4
-    docs = C.FIELDS.docs()
-    assert set(docs) == C.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
+    docs = C.RESPOConfig.FIELDS.docs()
+    assert set(docs) == C.RESPOConfig.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
 
 
 # ----- the reachability targets -----
@@ -198,11 +197,11 @@ def test_nu_steps_on_the_reach_weighted_violation_once_before_the_policy(monkeyp
 
 # ----- inside RLlib -----
 def test_two_iterations_report_respo_s_keys_and_v_p_stays_on_the_learner(ray_session):
-    algo = C.CONFIG_CLASS.build("lac/PointHazard-v0", 0, {"train_batch_size_per_learner": 400, "minibatch_size": 100,
+    algo = C.RESPOConfig.build("lac/PointHazard-v0", 0, {"train_batch_size_per_learner": 400, "minibatch_size": 100,
                                                     "num_epochs": 2, "num_envs_per_env_runner": 1},
                           timesteps=20_000).build_algo()
     try:
-        assert algo.ALGO == "respo"
+        assert algo.config.ALGO == "respo"
         results = [algo.train() for _ in range(2)]
         learner_module = algo.learner_group._learner.module[DEFAULT_MODULE_ID]
         assert hasattr(learner_module, "reach_vf") and not hasattr(algo.env_runner.module, "reach_vf")

@@ -14,7 +14,7 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from lac_rllib.algorithms import registry
 from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.algorithms.sac_lag.algorithm import SACLag
-from lac_rllib.algorithms.sac_lag.config import BF16_MIN_WIDTH, FIELDS, PRESETS, SACLagConfig, build_config
+from lac_rllib.algorithms.sac_lag.config import BF16_MIN_WIDTH, FIELDS, PRESETS, SACLagConfig
 from lac_rllib.algorithms.sac_lag.learner import ACTOR, actor_loss, critic_targets
 from lac_rllib.algorithms.sac_lag.module import SACLagTorchRLModule
 from lac_rllib.constrained.costs import COSTS
@@ -153,7 +153,7 @@ def test_raising_the_multiplier_raises_the_actor_losss_weight_on_the_cost_critic
 
 
 def _learner(**sets):
-    config = build_config("lac/PointHazard-v0", 0, {"actor_hidden": (16, 16), "critic_hidden": (16, 16), **sets})
+    config = SACLagConfig.build("lac/PointHazard-v0", 0, {"actor_hidden": (16, 16), "critic_hidden": (16, 16), **sets})
     return config.build_learner(env=get_task("lac/PointHazard-v0").make({}))
 
 
@@ -266,7 +266,7 @@ def test_lambda_waits_for_the_warm_up_then_steps_once_per_update(one_torch_threa
 def _probe_config(**sets):
     base = {"obs_normalization": False, "env_steps_per_iteration": 50, "replay_capacity": 1000, "batch_size": 16,
             "actor_hidden": (16, 16), "critic_hidden": (16, 16), "random_env_steps": 50, "num_envs_per_env_runner": 1}
-    return build_config(PROBE, 0, {**base, **sets})
+    return SACLagConfig.build(PROBE, 0, {**base, **sets})
 
 
 @pytest.mark.parametrize("num_envs, draws", [(1, "with_replacement"), (3, "with_replacement"), (3, "shuffled_passes")])
@@ -342,8 +342,8 @@ def test_env_runners_act_with_the_actor_on_its_bounds():
 
 def test_the_registry_interface():
     mod = registry.algo_config("sac_lag")
-    assert mod.CONFIG_CLASS is SACLagConfig and SACLagConfig.FIELDS is FIELDS and SACLagConfig.PRESETS is PRESETS
-    assert set(PRESETS) == {"mujoco", "safety_gym", "tiny"} and mod.ACTIONS == ("generator",)
+    assert mod is SACLagConfig and SACLagConfig.FIELDS is FIELDS and SACLagConfig.PRESETS is PRESETS
+    assert set(PRESETS) == {"mujoco", "safety_gym", "tiny"} and mod.ACTIONS == ("generator", "stochastic")
     assert mod.SPEED_FIELDS <= FIELDS.names and "torch_threads" in mod.SPEED_FIELDS
     nav = registry.build_config("sac_lag", "SafetyPointGoal1-v0", 0, {}, timesteps=1000)
     assert (nav.alpha, nav.actor_lr, nav.critic_lr, nav.nu_init, nav.lagrangian_lr) == (1e-5, 5e-6, 1e-3, 0.0, 5e-7)
@@ -353,6 +353,6 @@ def test_the_registry_interface():
     with pytest.raises(ValueError, match=r"SAC-Lag config field lagrangian_rule='pid' is invalid; accepted: adam"):
         SACLagConfig().training(lagrangian_rule="pid")
     with pytest.raises(ValueError, match="log_std_min < log_std_max"):
-        build_config("lac/PointHazard-v0", 0, {"log_std_min": 2.0})
+        SACLagConfig.build("lac/PointHazard-v0", 0, {"log_std_min": 2.0})
     docs = FIELDS.docs()
     assert set(docs) == FIELDS.names and all(docs.values())

@@ -10,7 +10,7 @@ path through the hazard). Seed 1: 1.14 / 0.82 against 7.15 / 0.83. A random poli
 import pytest
 from conftest import assert_learns_unsafely, assert_learns_within, learning_run
 
-from lac_rllib.algorithms.sac_lag.config import build_config
+from lac_rllib.algorithms.sac_lag.config import SACLagConfig
 
 # One worker runs these (with LAC's learning runs): each module-scoped run takes minutes of a core.
 pytestmark = [pytest.mark.xdist_group("learning"), pytest.mark.slow]
@@ -19,7 +19,7 @@ TASK, STEPS, TAIL = "lac/PointHazard-v0", 30_000, 10  # judge the last TAIL iter
 
 
 def _run(**sets):
-    return learning_run(build_config(TASK, 0, sets), STEPS, TAIL)
+    return learning_run(SACLagConfig.build(TASK, 0, sets), STEPS, TAIL)
 
 
 @pytest.fixture(scope="module")
@@ -33,9 +33,9 @@ def pinned_run(ray_session):
 
 
 def test_the_lagrangian_run_learns_within_the_limit(lagrangian_run):
-    assert_learns_within(lagrangian_run, build_config(TASK, 0, {}).effective_cost_limit, nu_peak=0.5)
+    assert_learns_within(lagrangian_run, SACLagConfig.build(TASK, 0, {}).effective_cost_limit, nu_peak=0.5)
 
 
 def test_the_multiplier_does_the_work(lagrangian_run, pinned_run):
-    assert_learns_unsafely(pinned_run, build_config(TASK, 0, {}).effective_cost_limit)
+    assert_learns_unsafely(pinned_run, SACLagConfig.build(TASK, 0, {}).effective_cost_limit)
     assert lagrangian_run[1] < pinned_run[1] / 2

@@ -12,11 +12,16 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
-from lac_rllib.algorithms.ppo_lag.learner import TS_EPISODE_COSTS
 from lac_rllib.algorithms.trpo_lag import config as C
-from lac_rllib.algorithms.trpo_lag import learner as L
+from lac_rllib.constrained import trust_region_learner as L
 from lac_rllib.constrained.costs import completed_episode_stats
-from lac_rllib.constrained.metrics import KL_FULL_BATCH, LINE_SEARCH_BACKTRACKS, LINE_SEARCH_FRACTION, NU
+from lac_rllib.constrained.metrics import (
+    KL_FULL_BATCH,
+    LINE_SEARCH_BACKTRACKS,
+    LINE_SEARCH_FRACTION,
+    NU,
+    TS_EPISODE_COSTS,
+)
 from lac_rllib.constrained.trust_region import flat_params
 from lac_rllib.tasks import get_task
 
@@ -25,19 +30,19 @@ ROWS = 400
 
 
 def test_defaults_are_omnisafes_and_delta_is_per_action_dimension():
-    config = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
+    config = C.TRPOLagConfig.build("SafetyPointGoal1-v0", 0, {}, timesteps=100_000)
     assert (config.target_kl, config.kl_per_action_dim, config.cg_iters, config.cg_damping, config.backtrack_iters,
             config.backtrack_coeff) == (0.01, True, 15, 0.1, 15, 0.8)  # TRPOLag.yaml, trpo.py
     assert (config.critic_lr, config.num_epochs, config.minibatch_size, config.nu_init, config.lagrangian_lr,
             config.train_batch_size_per_learner) == (1e-3, 10, 128, 0.001, 0.035, 20_000)
     assert config.max_kl(2) == pytest.approx(0.02) and config.max_kl(17) == pytest.approx(0.17)
-    ssa = C.CONFIG_CLASS.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
+    ssa = C.TRPOLagConfig.build("SafetyPointGoal1-v0", 0, {"preset": "ssa"}, timesteps=100_000)
     assert (ssa.cg_iters, ssa.backtrack_iters, ssa.backtrack_coeff, ssa.nu_init, ssa.lagrangian_lr,
             ssa.nu_parametrization, ssa.train_batch_size_per_learner, ssa.hidden, ssa.minibatch_size) == \
         (10, 10, 0.8, 1.0, 0.05, "softplus", 30_000, (256, 256), None)
     assert ssa.max_kl(2) == 0.01  # [S]'s KL sums over the dimensions: δ is not converted
-    docs = C.FIELDS.docs()
-    assert set(docs) == C.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
+    docs = C.TRPOLagConfig.FIELDS.docs()
+    assert set(docs) == C.TRPOLagConfig.FIELDS.names and all(docs.values()) and set(C.PRESETS) == set(C.PRESET_NAMES)
 
 
 def learner_and_episodes(**fields):

@@ -1,4 +1,4 @@
-"""Tests for sweeps/importance.py on synthetic sweeps whose deciding field is known."""
+"""Tests for sweeps/reports/importance.py on synthetic sweeps whose deciding field is known."""
 
 import math
 
@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 
-from sweeps import importance
+from sweeps.reports import importance
 
 NAN = math.nan
 

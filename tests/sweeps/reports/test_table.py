@@ -1,4 +1,4 @@
-"""The paper's tables (sweeps/table.py, sweeps/published.yaml, sweeps/builtin/table1.yaml and
+"""The paper's tables (sweeps/reports/table.py, sweeps/reports/published.yaml, sweeps/builtin/table1.yaml and
 table2.yaml): the table of a hand-made sweep over tasks × algorithms, the published figures as
 transcribed and checked, and the plans of the two table sweeps. No Ray."""
 
@@ -10,9 +10,10 @@ import pytest
 
 from lac_rllib.algorithms.registry import ALGOS
 from sweeps import run as cli
-from sweeps import sweep_file, table
-from sweeps.published import PublishedError, load_published
-from sweeps.table import BEST_MARK
+from sweeps import sweep_file
+from sweeps.reports import table
+from sweeps.reports.published import PublishedError, load_published
+from sweeps.reports.table import BEST_MARK
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NAN = math.nan

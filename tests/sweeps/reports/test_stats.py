@@ -1,11 +1,11 @@
-"""sweeps/stats.py against values computed here independently (plain numpy resampling, pair counts)."""
+"""sweeps/reports/stats.py against values computed here independently (plain numpy resampling, pair counts)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from sweeps import stats
+from sweeps.reports import stats
 
 SCORES = np.array([1.0, 2.0, 3.0, 4.0, 10.0])  # skewed: the mean's interval is not symmetric
 

@@ -1,4 +1,4 @@
-"""The published figures a table is read beside (sweeps/published.yaml): the paper's Tables 1-2 and
+"""The published figures a table is read beside (sweeps/reports/published.yaml): the paper's Tables 1-2 and
 OmniSafe's benchmark on our simulator, as data checked when read.
 
 Each figure has a source (with its URL, simulator, env steps and per-task limit), our task id and
@@ -6,7 +6,7 @@ algorithm name, and [mean, std] of return and cost as the source prints them. A 
 carry ``at_steps``: the same curve at earlier budgets, read off the source's published learning-curve
 image with a stated tolerance (:class:`AtSteps`), so a run at 500k is set beside the source at 500k
 rather than at its final 1e7 (:meth:`Figure.at`). A bad file is one line,
-``FILE:LINE: key.path: what is wrong`` (:class:`PublishedError`). sweeps/table.py and
+``FILE:LINE: key.path: what is wrong`` (:class:`PublishedError`). sweeps/reports/table.py and
 benchmarks/fidelity.py place them beside their runs.
 """
 
@@ -160,7 +160,7 @@ class Figure(BaseModel):
 
 
 class Published(BaseModel):
-    """The published-figures file (sweeps/published.yaml)."""
+    """The published-figures file (sweeps/reports/published.yaml)."""
 
     model_config = _schema()
     algorithms: dict[str, Text] = Field(min_length=1)
@@ -249,5 +249,5 @@ def _first_error(e: ValidationError, origin: Origin) -> str:
 
 @functools.lru_cache(maxsize=1)
 def published() -> Published:
-    """The package's published figures (sweeps/published.yaml), read once."""
+    """The package's published figures (sweeps/reports/published.yaml), read once."""
     return load_published()

@@ -1,4 +1,4 @@
-"""A sweep's close (sweeps/results.py): what the parent run's report holds, end to end."""
+"""A sweep's close (sweeps/reports/results.py): what the parent run's report holds, end to end."""
 
 import pytest
 import yaml
@@ -67,7 +67,7 @@ def test_the_ablation_s_unconstrained_arm_runs_with_nu_0_throughout(ray_session,
 def test_the_evaluation_blocks_share_of_the_trials_time_is_their_seconds_against_training():
     import pandas as pd
 
-    from sweeps.results import evaluation_share
+    from sweeps.reports.results import evaluation_share
 
     trials = pd.DataFrame({"eval_time_s": [3.0, 5.0, float("nan")], "wall_time_s": [36.0, 36.0, 40.0]})
     line = evaluation_share(trials)

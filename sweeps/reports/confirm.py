@@ -73,8 +73,8 @@ def held_up(search: dict, confirmed: dict) -> bool:
 
 def confirmation_markdown(top: list[dict], summary: pd.DataFrame) -> str:
     """The confirmation's verdict, one row per winner: its search interval against its confirmed one."""
-    from sweeps.configurations import ci as _ci
-    from sweeps.configurations import fmt_num as _fmt_num
+    from sweeps.reports.configurations import ci as _ci
+    from sweeps.reports.configurations import fmt_num as _fmt_num
 
     by_group = {r["group"]: r for r in summary.to_dict("records")}
     lines = ["**Confirmation on fresh seeds** (the search's best by the lower end of the return interval):", "",

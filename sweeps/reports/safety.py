@@ -18,7 +18,7 @@ cost above the limit its runs paid on the way there.
   over the seeds that got there, ``never_feasible`` how many did not) and the longest run of
   infeasible iterations (``longest_infeasible``, the most over its seeds).
 
-Seeds are counted as sweeps.report counts them: failed trials (status ERROR, or a NaN final return
+Seeds are counted as sweeps.reports.report counts them: failed trials (status ERROR, or a NaN final return
 or cost) and trials a scheduler stopped early (STOPPED) are left out, so ``n_seeds`` here equals
 the summary's.
 """
@@ -32,9 +32,9 @@ import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST
-from sweeps.configurations import KEYS
-from sweeps.configurations import prepared as _prepared
-from sweeps.configurations import value_key as _value_key
+from sweeps.reports.configurations import KEYS
+from sweeps.reports.configurations import prepared as _prepared
+from sweeps.reports.configurations import value_key as _value_key
 
 CONFIDENCE = 0.95
 SAFETY_COLUMNS = ["n_seeds", "n_feasible", "p_feasible", "p_feasible_low", "p_feasible_high", "violation_total",
@@ -110,7 +110,7 @@ def _with_limit(curve, limit: float):
 
 
 def safety_table(trials: pd.DataFrame, curves: dict) -> pd.DataFrame:
-    """One row per configuration (``KEYS``, in sweeps.report.summarize's order) with
+    """One row per configuration (``KEYS``, in sweeps.reports.report.summarize's order) with
     ``SAFETY_COLUMNS``: n_seeds, n_feasible, p_feasible [p_feasible_low, p_feasible_high] (Wilson),
     the mean over its seeds of violation_total and violation_mean (seeds without a curve left out),
     the worst iteration over its seeds (worst_excess, worst_env_steps, worst_trial_id) and the

@@ -1,4 +1,4 @@
-"""Tests for sweeps/report.py (pure pandas/matplotlib, no Ray)."""
+"""Tests for sweeps/reports/report.py (pure pandas/matplotlib, no Ray)."""
 
 import json
 import math
@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweeps import report
+from sweeps.reports import report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NAN = math.nan

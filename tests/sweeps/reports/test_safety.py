@@ -1,5 +1,5 @@
-"""Tests for sweeps/safety.py (Wilson interval, violation, the per-configuration table) and
-sweeps/chain_health.py (the chain flags), on hand-made numbers."""
+"""Tests for sweeps/reports/safety.py (Wilson interval, violation, the per-configuration table) and
+sweeps/reports/chain_health.py (the chain flags), on hand-made numbers."""
 
 import math
 
@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from sweeps import chain_health, safety
+from sweeps.reports import chain_health, safety
 
 NAN = math.nan
 

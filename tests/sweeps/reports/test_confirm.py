@@ -1,5 +1,5 @@
 """Confirmation: a sweep's winners, picked by the lower end of their return interval, rerun on
-seeds the sweep never saw (sweeps/confirm.py, ``--confirm-top``)."""
+seeds the sweep never saw (sweeps/reports/confirm.py, ``--confirm-top``)."""
 
 import json
 import math
@@ -9,8 +9,9 @@ import pandas as pd
 import pytest
 from mlflow.tracking import MlflowClient
 
-from sweeps import confirm, sweep_file
 from sweeps import run as cli
+from sweeps import sweep_file
+from sweeps.reports import confirm
 
 
 def _summary():

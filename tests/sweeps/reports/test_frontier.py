@@ -1,4 +1,4 @@
-"""Tests for sweeps/frontier.py: the frontier's logic on hand-made points, then its two plots."""
+"""Tests for sweeps/reports/frontier.py: the frontier's logic on hand-made points, then its two plots."""
 
 import math
 
@@ -6,7 +6,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pandas as pd
 
-from sweeps import frontier
+from sweeps.reports import frontier
 
 NAN = math.nan
 

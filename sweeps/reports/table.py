@@ -7,12 +7,12 @@ the paper's Tables 1 and 2: a block of rows per task, a column per algorithm (``
 
 Conventions:
 - A cell is one (task, algorithm): the final return and cost of its trials, mean ± std over seeds
-  (ddof=1) and the 95% bootstrap interval of the mean (sweeps/stats.py). Failed trials and trials
+  (ddof=1) and the 95% bootstrap interval of the mean (sweeps/reports/stats.py). Failed trials and trials
   a scheduler stopped early are counted, not averaged (as in summary.md).
 - **Bold**: a feasible cell, mean cost ≤ the limit (the trials' ``cost_limit``), as the paper bolds.
 - ★: the best feasible algorithm of the task, the highest mean return among its feasible cells
   (the paper's blue); ties at the printed precision (2 decimals) are all marked.
-- Below the cells, the same algorithm on the same task as published (sweeps/published.yaml): the
+- Below the cells, the same algorithm on the same task as published (sweeps/reports/published.yaml): the
   paper's figure (Table 1 or 2) and, on Safety-Gymnasium's tasks, OmniSafe's; blank where a source
   has none. Each at the sweep's own budget where the source has a figure there (OmniSafe's at 500k,
   1M and 2.5M are read from its published curves: "read from a curve", ± the reading's tolerance,
@@ -23,7 +23,7 @@ Conventions:
   algorithm that ran more than one configuration on a task (a cell would average different
   configurations; summary.md keeps them apart).
 
-The published figures are data, checked when read (sweeps/published.py).
+The published figures are data, checked when read (sweeps/reports/published.py).
 """
 
 from __future__ import annotations
@@ -42,10 +42,10 @@ import pandas as pd  # noqa: E402
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO  # noqa: E402
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN  # noqa: E402
-from sweeps.configurations import fmt_num, is_na, prepared  # noqa: E402
-from sweeps.published import ROWS, AtSteps, Figure, Published, Source, published  # noqa: E402
+from sweeps.reports.configurations import fmt_num, is_na, prepared  # noqa: E402
+from sweeps.reports.published import ROWS, AtSteps, Figure, Published, Source, published  # noqa: E402
+from sweeps.reports.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
 from sweeps.score import described  # noqa: E402
-from sweeps.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
 
 BEST_MARK = "★"
 BEST_COLOUR = "#1f4fd1"  # the paper's blue

@@ -1,5 +1,5 @@
 """EpisodeLengths: the learner connector that records how long the batch's completed episodes were
-(CPO's and PCPO's ``cost_gap_scale="episode_length"``, learner.py)."""
+(CPO's and PCPO's ``cost_gap_scale="episode_length"``: lac_rllib/algorithms/cpo/learner.py)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Cost GAE: the learner connector that gives PPO-Lag its cost advantages and cost value targets.
+"""Cost GAE: the learner connector that gives the on-policy family its cost advantages and cost value
+targets.
 
 RLlib's PPO learner pipeline (PPOLearner.build) starts with ``AddOneTsToEpisodesAndTruncate``
 (each episode chunk gets a phantom last row, masked out by ``LOSS_MASK``, whose value bootstraps
@@ -71,10 +72,10 @@ class CostGAE(ConnectorV2):
 
     It keeps the observations, behaviour-policy inputs and mask of the last batch it completed
     (``last_batch``: module id → those columns): the learner's KL early stop measures the policy's
-    drift on the whole batch (learner.py). A learner that needs more of the whole batch (the
+    drift on the whole batch (on_policy_learner.py). A learner that needs more of the whole batch (the
     trust-region step: actions, log-probabilities, both advantages) sets ``kept_columns``."""
 
-    #: The columns of the whole batch ``last_batch`` keeps (PPO-Lag: the KL early stop's).
+    #: The columns of the whole batch ``last_batch`` keeps (the KL early stop's).
     kept_columns: tuple[str, ...] = KL_COLUMNS
 
     def __init__(self, input_observation_space=None, input_action_space=None, *, gamma: float, lambda_: float,
@@ -90,7 +91,7 @@ class CostGAE(ConnectorV2):
             if not hasattr(module, "compute_cost_values") or COSTS not in columns:
                 continue
             if module.is_stateful():
-                raise ValueError("PPO-Lag's cost GAE supports stateless modules only (rows in episode order)")
+                raise ValueError("the cost GAE supports stateless modules only (rows in episode order)")
             with torch.no_grad():
                 values_t = module.compute_cost_values(columns)
             values = convert_to_numpy(values_t)

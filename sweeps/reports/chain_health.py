@@ -27,7 +27,7 @@ from __future__ import annotations
 import pandas as pd
 
 from lac_rllib.constrained.metrics import ACTOR_STD_MEAN, LANGEVIN_AT_BOUND, LANGEVIN_CLIP_FRACTION
-from sweeps.configurations import KEYS
+from sweeps.reports.configurations import KEYS
 
 AT_BOUND_MAX = 0.10  # mean fraction of chain end points on an action bound above which it is flagged
 CLIP_EVERY_STEP = 0.99  # mean clip fraction from which "the clip binds every step"

@@ -1,15 +1,15 @@
 """Which hyperparameters matter, for the final return and for the final cost, in a search or a grid.
 
-Each configuration (sweeps.report.KEYS) becomes one completed trial of an in-memory Optuna study:
+Each configuration (sweeps.reports.report.KEYS) becomes one completed trial of an in-memory Optuna study:
 its field values as params, the mean over its scored seeds of the final return (or cost) as value.
-Scored seeds are those sweeps.report counts: failed trials (ERROR, or a NaN final return or cost)
+Scored seeds are those sweeps.reports.report counts: failed trials (ERROR, or a NaN final return or cost)
 and trials a scheduler stopped early (STOPPED, a score at a smaller budget) are left out. A grid
 and a search are then the same thing to Optuna, and its importance evaluators and plots apply.
 
 Evaluator: fANOVA (``FanovaImportanceEvaluator(seed=0)``: a random forest fitted to (params →
 value), the share of the value's variance each param explains; Hutter et al. 2014). Compared on
 synthetic sweeps where one field decides the value and one is noise (2-30 configurations; the
-5 × 5 grid and 30-sample search of tests/sweeps/test_importance.py among them): fANOVA ranks the
+5 × 5 grid and 30-sample search of tests/sweeps/reports/test_importance.py among them): fANOVA ranks the
 deciding field first from 9 configurations on (a 3 × 3 grid: 0.97) and does not depend on the
 direction; PED-ANOVA (``PedAnovaImportanceEvaluator``) compares the top 10% of the trials with
 all of them, which at 9-25 configurations is 1-2 trials: it scored the same 3 × 3 grid 0.50 /
@@ -49,9 +49,9 @@ import pandas as pd  # noqa: E402
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution  # noqa: E402
 
 from lac_rllib.constrained.metrics import EPISODE_COST, EPISODE_RETURN  # noqa: E402
-from sweeps.configurations import KEYS  # noqa: E402
-from sweeps.configurations import is_na as _is_na  # noqa: E402
-from sweeps.configurations import prepared as _prepared  # noqa: E402
+from sweeps.reports.configurations import KEYS  # noqa: E402
+from sweeps.reports.configurations import is_na as _is_na  # noqa: E402
+from sweeps.reports.configurations import prepared as _prepared  # noqa: E402
 
 SEED = 0  # fANOVA's forest is seeded: the same sweep gives the same importances
 MIN_CONFIGURATIONS = 5

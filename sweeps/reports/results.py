@@ -52,23 +52,15 @@ from sweeps.tracking import (
     STOPPED_TAG,
     SweepTracker,
     learning_curve,
+    param_value,
 )
 
 #: Where Optuna 5's ``trial.set_constraint`` keeps the constraint the sweep hands it (sweeps/sweep.py).
 OPTUNA_CONSTRAINT_KEY = "constraints:episode_cost_minus_limit"
 #: The seconds a trial's evaluation blocks took, all together (sweeps/trainable.py).
 EVAL_TIME_S = "eval_time_s"
-#: The final-iteration metrics the chain-health flags read (sweeps/chain_health.py).
+#: The final-iteration metrics the chain-health flags read (sweeps/reports/chain_health.py).
 CHAIN_FINAL = (LANGEVIN_AT_BOUND, LANGEVIN_CLIP_FRACTION, ACTOR_STD_MEAN)
-
-
-def param_value(text: str):
-    """A logged param as its value: JSON for numbers and None, the text itself for a string
-    (sweeps.tracking logs strings as they are, e.g. a swept ``algo``)."""
-    try:
-        return json.loads(text)
-    except ValueError:
-        return text
 
 
 def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = ()) -> tuple[pd.DataFrame, dict]:
@@ -122,7 +114,7 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     """The report on the parent run (``summary/``) and the note that leads it; the parent closed."""
     from mlflow.entities import Metric
 
-    from sweeps.report import (
+    from sweeps.reports.report import (
         algorithm_comparison,
         note_markdown,
         nothing_feasible_markdown,
@@ -130,7 +122,7 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
         summarize,
         write_sweep_reports,
     )
-    from sweeps.table import table_markdown, write_table_report
+    from sweeps.reports.table import table_markdown, write_table_report
 
     fields = swept_fields(plan) if plan is not None else ()
     trials, curves = sweep_results(tracker, parent, fields)
@@ -183,8 +175,8 @@ def budget_note(plan) -> str:
 
 
 def swept_fields(plan) -> tuple[str, ...]:
-    """The fields a sweep varies (sweeps/confirm.py ``varied_fields``) and ``algo``."""
-    from sweeps.confirm import varied_fields
+    """The fields a sweep varies (sweeps/reports/confirm.py ``varied_fields``) and ``algo``."""
+    from sweeps.reports.confirm import varied_fields
 
     return tuple(dict.fromkeys([*varied_fields(plan.sweep), "algo"]))
 
@@ -192,11 +184,11 @@ def swept_fields(plan) -> tuple[str, ...]:
 def note_extras(summary, trials, curves, fields, plan, pareto) -> str:
     """What the note adds below its head: a confirmation's verdict, the Pareto set, the top three
     fields for return and cost, the safety statistics and chain-health flags."""
-    from sweeps import report
+    from sweeps.reports import report
 
     parts = []
     if plan is not None and plan.confirms:
-        from sweeps.confirm import confirmation_markdown
+        from sweeps.reports.confirm import confirmation_markdown
 
         parts.append(confirmation_markdown(list(plan.confirms), summary))
     if pareto:

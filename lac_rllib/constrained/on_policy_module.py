@@ -1,4 +1,5 @@
-"""PPOLagTorchRLModule: RLlib's default PPO networks plus a cost critic and the multiplier ν.
+"""OnPolicyTorchRLModule: the on-policy family's module, RLlib's default PPO networks plus a cost
+critic and the multiplier ν (0 for ever in the algorithms without one: P3O, CPO, PCPO).
 
 - ``encoder.actor_encoder`` + ``pi``: the Gaussian policy, an MLP (``fcnet_hiddens``,
   ``fcnet_activation``) to the mean and a state-independent log σ (``free_log_std``) [O, S];
@@ -6,7 +7,7 @@
   (``vf_share_layers=False``) [O, S];
 - ``cost_vf``: the cost critic V_C, a third MLP of that shape, built by the same RLlib catalog;
 - ``nu``: the Lagrange multiplier ν, a buffer (it travels with the weights into checkpoints and
-  to the env runners). Only the learner's ``LagrangeMultiplier`` writes it.
+  to the env runners). Only a learner's ``LagrangeMultiplier`` writes it (lagrangian_learner.py).
 
 Only the policy (and ν) exist on env runners: both critics are non-inference attributes.
 """
@@ -34,13 +35,14 @@ class CostCritic(torch.nn.Module):
         return self.head(self.encoder({Columns.OBS: obs})[ENCODER_OUT]).squeeze(-1)
 
 
-class PPOLagTorchRLModule(DefaultPPOTorchRLModule):
+class OnPolicyTorchRLModule(DefaultPPOTorchRLModule):
     @override(DefaultPPOTorchRLModule)
     def setup(self):
         super().setup()
         cfg = self.model_config
         if cfg.get("vf_share_layers"):
-            raise ValueError("PPO-Lag needs separate networks (vf_share_layers=False): one optimizer per network")
+            raise ValueError("the on-policy family needs separate networks (vf_share_layers=False): one optimizer "
+                             "per network")
         self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
         with torch.no_grad():  # RLlib starts the free log σ at 0 [O]; [S] at −0.5
             self.pi.log_std.fill_(float(cfg["log_std_init"]))

@@ -29,15 +29,15 @@ import pandas as pd  # noqa: E402
 
 from lac_rllib.algorithms.registry import ALGOS, DEFAULT_ALGO
 from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE  # noqa: E402
-from sweeps.configurations import KEYS  # noqa: E402
-from sweeps.configurations import ci as _ci  # noqa: E402
-from sweeps.configurations import fmt_num as _fmt_num  # noqa: E402
-from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
-from sweeps.configurations import is_na as _is_na  # noqa: E402
-from sweeps.configurations import prepared as _prepared  # noqa: E402
-from sweeps.configurations import value_key as _value_key  # noqa: E402
+from sweeps.reports.configurations import KEYS  # noqa: E402
+from sweeps.reports.configurations import ci as _ci  # noqa: E402
+from sweeps.reports.configurations import fmt_num as _fmt_num  # noqa: E402
+from sweeps.reports.configurations import fmt_value as _fmt_value  # noqa: E402
+from sweeps.reports.configurations import is_na as _is_na  # noqa: E402
+from sweeps.reports.configurations import prepared as _prepared  # noqa: E402
+from sweeps.reports.configurations import value_key as _value_key  # noqa: E402
+from sweeps.reports.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 from sweeps.score import EVAL_COST, EVAL_RETURN, TRAIN_COST, TRAIN_RETURN, described  # noqa: E402
-from sweeps.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
 
 STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
          "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean", "is_default",
@@ -424,12 +424,12 @@ def trial_curve(curve_df: pd.DataFrame, path, title: str) -> str:
 
 
 def with_safety(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> pd.DataFrame:
-    """The summary with each configuration's safety statistics (sweeps/safety.py: P(feasible at the
+    """The summary with each configuration's safety statistics (sweeps/reports/safety.py: P(feasible at the
     end) with its Wilson interval, the violation over training, the worst iteration, the spread of
     the final cost), its place on the reward-cost frontier and its chain-health flags."""
-    from sweeps.chain_health import chain_flags
-    from sweeps.frontier import frontier
-    from sweeps.safety import safety_table
+    from sweeps.reports.chain_health import chain_flags
+    from sweeps.reports.frontier import frontier
+    from sweeps.reports.safety import safety_table
 
     def key(values) -> tuple:
         return tuple("" if _is_na(v) else str(v) for v in values)
@@ -495,7 +495,7 @@ def importance_markdown(trials: pd.DataFrame, fields: tuple[str, ...]) -> str:
     when the sweep varies nothing."""
     if not fields:
         return ""
-    from sweeps.importance import importance_line, importances
+    from sweeps.reports.importance import importance_line, importances
 
     return importance_line(importances(trials, list(fields)))
 
@@ -517,8 +517,8 @@ def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir, fields: tup
     """Write summary.csv/.md (with the safety statistics), best.json, trials.csv, the plots, the
     reward-cost frontier (PNG and interactive HTML) and, where the sweep varies ``fields``, which of
     them matter (importance.png/.html); return {file name: path}."""
-    from sweeps.frontier import frontier_html, frontier_png
-    from sweeps.importance import importance_plots
+    from sweeps.reports.frontier import frontier_html, frontier_png
+    from sweeps.reports.importance import importance_plots
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

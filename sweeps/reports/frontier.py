@@ -1,6 +1,6 @@
 """The reward-cost frontier of a sweep: which configurations are worth having.
 
-A configuration (a row of ``sweeps.report.summarize``) is *feasible* when its mean final cost is
+A configuration (a row of ``sweeps.reports.report.summarize``) is *feasible* when its mean final cost is
 within the limit (cost_mean <= cost_limit) and *on the frontier* when it is feasible and no other
 feasible configuration of the same task has a return at least as high and a cost at least as low,
 with one of the two strictly better. Two configurations with the same return and cost do not
@@ -9,7 +9,7 @@ return or cost) or without a limit is never on it. Why feasible only: a constrai
 an over-limit policy below every within-limit one, however high its return.
 
 The plot shows every configuration on (cost, return) axes with its 95% bootstrap intervals in
-both directions (sweeps/stats.py), one panel per task: the cost limit dashed, the frontier starred
+both directions (sweeps/reports/stats.py), one panel per task: the cost limit dashed, the frontier starred
 and joined in order of cost, the default configuration ringed, and the baselines of a compare
 sweep (another ``algo`` than LAC) in a colour of their own per algorithm. ``frontier_html`` is the
 same figure in plotly, with the configuration, its intervals, seeds and feasible fraction on hover;
@@ -29,8 +29,8 @@ import pandas as pd  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO
-from sweeps.configurations import fmt_value as _fmt_value  # noqa: E402
-from sweeps.configurations import is_na as _is_na  # noqa: E402
+from sweeps.reports.configurations import fmt_value as _fmt_value  # noqa: E402
+from sweeps.reports.configurations import is_na as _is_na  # noqa: E402
 
 LAC = DEFAULT_ALGO  # the project's algorithm (the registry's default)
 LAC_COLOUR = "tab:blue"
