@@ -16,10 +16,13 @@ Plain torch, no RLlib: the learners call it (LAC's, SAC-Lag's, constrained/lagra
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Protocol
+from typing import Any, Protocol
 
 import torch
+
+from lac_rllib.constrained.fields import NON_NEGATIVE, or_none, param
 
 
 class StepRule(Protocol):
@@ -96,6 +99,36 @@ class SoftplusAdamStep:
     def set_state(self, state: dict) -> None:
         self.p = float(state["p"])
         self.adam.set_state(state["adam"])
+
+
+class HeldStep:
+    """ν held where it is, every step: a fixed-multiplier run (``nu_fixed``)."""
+
+    def step(self, nu: float, episode_cost: float, cost_limit: float) -> float:
+        return nu
+
+    def get_state(self) -> dict:
+        return {}
+
+    def set_state(self, state: dict) -> None:
+        pass
+
+
+@dataclasses.dataclass
+class FixedMultiplierParams:
+    """The field every algorithm with a Lagrange multiplier has (LAC, SAC-Lag and the on-policy
+    Lagrangian family): ν frozen for a whole run, the runs that trace a task's empirical return-cost
+    frontier (docs/sweeps.md, "The fixed-multiplier frontier")."""
+
+    nu_fixed: float | None = param(None, accepts=or_none(NON_NEGATIVE))
+    """ν for the whole run, never stepped nor bounded (the learning rate, bound and ν₀ of the
+    multiplier then change nothing); None = the multiplier learns [D]."""
+
+
+def initial_nu(model_config: dict[str, Any]) -> float:
+    """ν₀ of a module: ``nu_fixed`` where set, else ``nu_init``."""
+    fixed = model_config.get("nu_fixed")
+    return float(fixed if fixed is not None else model_config["nu_init"])
 
 
 class AdaptiveBound:
@@ -205,3 +238,11 @@ def restore_multipliers(multipliers: dict, modules, saved: dict) -> None:
         multipliers[mid].bind(module.unwrapped().nu)
     for mid, state in saved.items():
         multipliers[mid].set_state(state)
+
+
+def fixed_multiplier(value: torch.Tensor, config) -> "LagrangeMultiplier | None":
+    """The multiplier of a run whose config sets ``nu_fixed`` (ν held at it, unbounded); None where
+    ν learns (the algorithm's own rule then)."""
+    if getattr(config, "nu_fixed", None) is None:
+        return None
+    return LagrangeMultiplier(value, cost_limit=config.effective_cost_limit, rule=HeldStep(), bounded=False)

@@ -22,6 +22,7 @@ from lac_rllib.constrained.lagrange import (
     GradientStep,
     LagrangeMultiplier,
     SoftplusAdamStep,
+    fixed_multiplier,
     restore_multipliers,
 )
 
@@ -39,8 +40,11 @@ class LagrangianLearner:
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
         """ν of ``module``: Adam on ν itself [O common/lagrange.py] or on softplus⁻¹(ν) [S], or the
-        plain step of eq. (14) (``nu_optimizer="sgd"`` [F]); held under ``nu_max`` if set."""
+        plain step of eq. (14) (``nu_optimizer="sgd"`` [F]); held under ``nu_max`` if set; or held
+        at ``nu_fixed`` for the whole run."""
         config = self.config.get_config_for_module(module_id)
+        if held := fixed_multiplier(module.unwrapped().nu, config):
+            return held
         if config.nu_optimizer == "sgd":
             rule = GradientStep(config.lagrangian_lr)
         elif config.nu_parametrization == "direct":

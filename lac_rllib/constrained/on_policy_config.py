@@ -41,6 +41,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.lagrange import FixedMultiplierParams, initial_nu
 from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
 from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
@@ -142,7 +143,7 @@ class OnPolicyParams(SafeTaskParams):
 
 
 @dataclasses.dataclass
-class OnPolicyLagParams(OnPolicyParams):
+class OnPolicyLagParams(OnPolicyParams, FixedMultiplierParams):
     """The Lagrange multiplier's fields, after the on-policy family's (:class:`OnPolicyParams`)."""
 
     # --- Lagrange multiplier ---
@@ -266,5 +267,7 @@ class OnPolicyConfig(SafeTaskConfig, PPOConfig):
         return {**super()._model_config_auto_includes,
                 "fcnet_hiddens": list(self.hidden), "fcnet_activation": self.activation, "head_fcnet_hiddens": [],
                 "vf_share_layers": False, "free_log_std": True, "log_std_init": self.log_std_init,
-                "nu_init": getattr(self, "nu_init", 0.0),  # no multiplier (P3O, CPO, PCPO): ν stays 0
+                # no multiplier (P3O, CPO, PCPO): ν stays 0
+                "nu_init": initial_nu({"nu_init": getattr(self, "nu_init", 0.0),
+                                       "nu_fixed": getattr(self, "nu_fixed", None)}),
                 "normalize_actions": self.normalize_actions}

@@ -22,6 +22,8 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.utils.annotations import override
 
+from lac_rllib.constrained.lagrange import initial_nu
+
 
 class CostCritic(torch.nn.Module):
     """V_C(s): an MLP encoder and a linear head, the same shapes as RLlib's reward critic."""
@@ -43,7 +45,7 @@ class OnPolicyTorchRLModule(DefaultPPOTorchRLModule):
         if cfg.get("vf_share_layers"):
             raise ValueError("the on-policy family needs separate networks (vf_share_layers=False): one optimizer "
                              "per network")
-        self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
+        self.register_buffer("nu", torch.tensor(initial_nu(cfg)))
         with torch.no_grad():  # RLlib starts the free log σ at 0 [O]; [S] at −0.5
             self.pi.log_std.fill_(float(cfg["log_std_init"]))
         self.cost_vf = CostCritic(self.catalog)  # deleted again on env runners (inference-only)

@@ -32,6 +32,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.lagrange import FixedMultiplierParams
 from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.off_policy_config import OffPolicyConfig
 from lac_rllib.constrained.precision import DTYPE_CHOICES as LANGEVIN_DTYPES
@@ -43,7 +44,7 @@ LR_SCHEDULES = ("linear", "constant")
 
 
 @dataclasses.dataclass
-class LACParams(SafeTaskParams):
+class LACParams(SafeTaskParams, FixedMultiplierParams):
     """The LAC hyperparameters (docs/spec.md §1-5), after the fields every constrained algorithm has
     (:class:`SafeTaskParams`). Defaults are the MuJoCo column of docs/spec.md §5.
 

@@ -26,7 +26,7 @@ from lac_rllib.algorithms.lac import module as M
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norm_, polyak_, zero_non_finite_
-from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier, restore_multipliers
+from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier, fixed_multiplier, restore_multipliers
 from lac_rllib.constrained.metrics import (
     ACTOR_KL,
     ACTOR_LOSS,
@@ -91,8 +91,11 @@ class LACTorchLearner(TorchLearner):
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
-        """ν of ``module``: eq. (14)'s gradient step, under [C]'s bound when ``nu_max_adaptive``."""
+        """ν of ``module``: eq. (14)'s gradient step, under [C]'s bound when ``nu_max_adaptive``; or
+        held at ``nu_fixed`` for the whole run."""
         config = self.config.get_config_for_module(module_id)
+        if held := fixed_multiplier(module.unwrapped().nu, config):
+            return held
         return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit,
                                   rule=GradientStep(config.nu_lr), bounded=config.nu_max_adaptive)
 

@@ -24,6 +24,7 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
 from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
+from lac_rllib.constrained.lagrange import initial_nu
 from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 from lac_rllib.constrained.precision import resolve_dtype
 
@@ -49,7 +50,7 @@ class LACTorchRLModule(ActorCriticRLModule):
             activation=cfg["actor_activation"], log_std_init=cfg["log_std_init"],
             mean_init_scale=cfg["actor_mean_init_scale"],
         )
-        self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
+        self.register_buffer("nu", torch.tensor(initial_nu(cfg)))
         if not self.inference_only:
             self.critics = CriticEnsemble(obs_dim, act_dim, hidden=tuple(cfg["critic_hidden"]))
         self.chain_settings = chain_settings(cfg, self.action_space)

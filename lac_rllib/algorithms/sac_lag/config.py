@@ -31,6 +31,7 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
+from lac_rllib.constrained.lagrange import FixedMultiplierParams
 from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
 from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.off_policy_config import OffPolicyConfig
@@ -46,7 +47,7 @@ MINIBATCH_DRAWS = ("with_replacement", "shuffled_passes")
 
 
 @dataclasses.dataclass
-class SACLagParams(SafeTaskParams):
+class SACLagParams(SafeTaskParams, FixedMultiplierParams):
     """The SAC-Lag hyperparameters, after the fields every constrained algorithm has
     (:class:`SafeTaskParams`). Defaults are OmniSafe's SACLag.yaml defaults (its MuJoCo column).
 

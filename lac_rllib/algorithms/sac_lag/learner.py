@@ -38,7 +38,13 @@ from lac_rllib.algorithms.sac_lag import module as M
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norm_, clip_global_norms_, polyak_, zero_non_finite_
-from lac_rllib.constrained.lagrange import AdamStep, GradientStep, LagrangeMultiplier, restore_multipliers
+from lac_rllib.constrained.lagrange import (
+    AdamStep,
+    GradientStep,
+    LagrangeMultiplier,
+    fixed_multiplier,
+    restore_multipliers,
+)
 from lac_rllib.constrained.metrics import (
     ACTOR_LOSS,
     COST_WINDOW_MEAN,
@@ -104,8 +110,11 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         self._actor_obs: dict[str, torch.Tensor] = {}  # the minibatch's observations, for the actor's step
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
-        """λ of ``module``: OmniSafe's Adam step on −λ·(Ĵ_C − b), then λ ≥ 0 (no upper bound [O])."""
+        """λ of ``module``: OmniSafe's Adam step on −λ·(Ĵ_C − b), then λ ≥ 0 (no upper bound [O]); or
+        held at ``nu_fixed`` for the whole run."""
         config = self.config.get_config_for_module(module_id)
+        if held := fixed_multiplier(module.unwrapped().nu, config):
+            return held
         rule = LAGRANGE_RULES[config.lagrangian_rule](config.lagrangian_lr)
         return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit, rule=rule,
                                   bounded=False)

@@ -27,6 +27,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.sac_lag.config import critic_matmul_dtype
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
 from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
+from lac_rllib.constrained.lagrange import initial_nu
 from lac_rllib.constrained.networks import CriticEnsemble
 from lac_rllib.constrained.precision import TORCH_DTYPES
 
@@ -51,7 +52,7 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         self.actor = SquashedGaussianActor(obs_dim, act_dim, hidden=tuple(cfg["actor_hidden"]),
                                            activation=cfg["activation"], log_std_min=cfg["log_std_min"],
                                            log_std_max=cfg["log_std_max"])
-        self.register_buffer("nu", torch.tensor(float(cfg["nu_init"])))
+        self.register_buffer("nu", torch.tensor(initial_nu(cfg)))
         # The action bounds as buffers: they move with the module to its device, and a restored
         # module's state is complete (lac_rllib.evaluation checks every buffer is restored).
         self.register_buffer("action_low", torch.tensor(np.array(self.action_space.low), dtype=torch.float32))
