@@ -111,16 +111,22 @@ def local_artifact_root(uri: str) -> str | None:
 
 def learning_curve(client, run_id: str, cost_limit: float):
     """A trial's learning curve from its run's metric histories, one row per logged iteration:
-    env_steps (the step), episode_return, episode_cost and the trial's ``cost_limit`` (a DataFrame;
-    what the trial's learning_curve.png and the sweep's learning_curves.png are drawn from)."""
+    env_steps (the step), episode_return, episode_cost, the trial's ``cost_limit``, and ν, ν's bound
+    (where the algorithm logs one) and the training's cost rate, by step (a DataFrame; what the
+    trial's learning_curve.png, the sweep's learning_curves.png and the multiplier's behaviour,
+    sweeps/reports/multiplier.py, are drawn from)."""
     import pandas as pd
 
-    from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN
+    from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU, NU_MAX
 
     returns = client.get_metric_history(run_id, EPISODE_RETURN)
     costs = client.get_metric_history(run_id, EPISODE_COST)
-    return pd.DataFrame({ENV_STEPS: [m.step for m in returns], EPISODE_RETURN: [m.value for m in returns],
-                         EPISODE_COST: [m.value for m in costs[:len(returns)]], COST_LIMIT: cost_limit})
+    curve = pd.DataFrame({ENV_STEPS: [m.step for m in returns], EPISODE_RETURN: [m.value for m in returns],
+                          EPISODE_COST: [m.value for m in costs[:len(returns)]], COST_LIMIT: cost_limit})
+    for key in (NU, NU_MAX, COST_RATE):
+        by_step = {m.step: m.value for m in client.get_metric_history(run_id, key)}
+        curve[key] = curve[ENV_STEPS].map(by_step).astype(float)
+    return curve
 
 
 def _params(d: dict) -> list[Param]:

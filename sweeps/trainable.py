@@ -194,6 +194,7 @@ class SweepTrial(tune.Trainable):
         """Final checkpoint, evaluation block and learning curve as artifacts, the trial's declared
         score (sweeps/score.py: the sweep's ``score``) and its train score logged, the score used
         tagged, then the MLflow run closed; returns the declared score."""
+        from sweeps.reports.multiplier import METRIC_PREFIX, multiplier_behaviour
         from sweeps.reports.report import trial_curve
 
         with tempfile.TemporaryDirectory() as tmp:
@@ -207,6 +208,7 @@ class SweepTrial(tune.Trainable):
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
         train = train_score(curve)
+        behaviour = {METRIC_PREFIX + k: v for k, v in multiplier_behaviour(curve).items() if math.isfinite(v)}
         try:  # the evaluation's metrics, logged above straight to the store
             metrics = self.tracker.client.get_run(self.tracker.run_id).data.metrics
         except Exception:  # the store away: ranked on train, and the tag says so
@@ -215,8 +217,8 @@ class SweepTrial(tune.Trainable):
         score = {SCORE_RETURN: ret, SCORE_COST: cost}
         # The run's final objective is its score's (what it is ranked on, and what Optuna is told).
         final = objective(ret, cost, self.algo_config.effective_cost_limit) if math.isfinite(ret + cost) else math.nan
-        logged = {k: v for k, v in {**score, TRAIN_RETURN: train[0], TRAIN_COST: train[1], OBJECTIVE: final}.items()
-                  if math.isfinite(v)}
+        logged = {k: v for k, v in {**score, TRAIN_RETURN: train[0], TRAIN_COST: train[1], OBJECTIVE: final,
+                                    **behaviour}.items() if math.isfinite(v)}
         if logged:
             self.tracker.log_metrics(logged, step=int(curve[ENV_STEPS].max()))
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint", SCORE_TAG: used})

@@ -24,11 +24,12 @@ import math
 import numpy as np
 import pandas as pd
 
-from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST, NU
+from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST, NU, NU_MAX
 
 #: The columns multiplier_behaviour returns, in the report's order.
 BEHAVIOUR_COLUMNS = ["steps_to_feasible", "overshoot", "swing", "nu_at_zero", "nu_at_bound", "cost_rate"]
-NU_MAX = "nu_max"  # the bound ν is held under at an iteration (LAC's adaptive one), where logged
+#: What a trial logs of them to its MLflow run (multiplier/steps_to_feasible, ...).
+METRIC_PREFIX = "multiplier/"
 #: ν counts as at 0, or at its bound, within this (ν is a float32 buffer).
 AT = 1e-6
 

@@ -32,3 +32,19 @@ def test_trial_runs_are_found_under_their_own_sweep_and_retries_drop_the_stale_e
     assert retry.open({"seed": 0}, {}) == new_run
     run = client.get_run(new_run)
     assert run.info.status == "RUNNING" and ERROR_TAG not in run.data.tags
+
+
+def test_the_learning_curve_carries_nu_its_bound_and_the_cost_rate_by_step():
+    """What the multiplier's behaviour is read from (sweeps/reports/multiplier.py): ν and the cost
+    rate by env step, ν's bound NaN for an algorithm that logs none."""
+    from types import SimpleNamespace
+
+    from sweeps.tracking import learning_curve
+
+    history = {"episode_return": [(1000, 1.0), (2000, 2.0)], "episode_cost": [(1000, 9.0), (2000, 4.0)],
+               "nu": [(1000, 0.0), (2000, 0.5)], "cost_rate": [(1000, 0.009), (2000, 0.0065)]}
+    client = SimpleNamespace(get_metric_history=lambda run, key: [SimpleNamespace(step=s, value=v)
+                                                                   for s, v in history.get(key, [])])
+    curve = learning_curve(client, "run", 5.0)
+    assert curve["nu"].tolist() == [0.0, 0.5] and curve["cost_rate"].tolist() == [0.009, 0.0065]
+    assert curve["nu_max"].isna().all() and curve["cost_limit"].tolist() == [5.0, 5.0]

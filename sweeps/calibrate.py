@@ -1,0 +1,211 @@
+"""``lac-sweep calibrate``: a task's cost range, and a ladder of cost limits proposed inside it.
+
+Users ask how to choose the cost limit of a new env (omnisafe#293, #363). Two short runs bound
+the costs that matter: a random policy's episodes, and the algorithm's with its multiplier pinned
+at 0 (``nu_fixed=0``: it learns the reward alone, so its cost is what a limit has to pull down).
+Their mean episode costs (the task's own convention: summed, or discounted by its
+``episode_cost_discount``) are the two ends; the ladder is ``limits`` values from the lower end
+up, evenly spaced and short of the upper one (at the upper end the constraint no longer binds),
+rounded to two significant figures, with 0 first (one of the ``limits``) where an episode of either run cost 0 (a zero
+cost is reachable there; omnisafe#384: a limit of 0 must work, and does here). It is printed and
+written as a sweep-file snippet (``cost_limits: [...]``).
+
+    lac-sweep calibrate --task lac/PointHazard-v0 [--algo ppo_lag] [--timesteps 20000]
+    lac-sweep calibrate --config my_sweep.yaml          # its tasks, a user's env included
+
+Every check runs before Ray starts; a user's env is announced before it is built.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+PROG = "lac-sweep calibrate"
+#: What the unconstrained run is scored on: the mean episode cost of its last fifth of iterations.
+TAIL = 0.2
+
+
+@dataclasses.dataclass
+class Calibration:
+    """One task's two runs and the ladder proposed between them."""
+
+    task: str
+    algo: str
+    random_costs: list[float]  # each random episode's cost
+    free_costs: list[float]  # the unconstrained run's mean episode cost per iteration, its tail
+    zero_seen: bool  # an episode of either run cost 0
+    ladder: list[float]
+
+    @property
+    def random_cost(self) -> float:
+        return float(np.mean(self.random_costs))
+
+    @property
+    def free_cost(self) -> float:
+        return float(np.mean(self.free_costs))
+
+
+def round2(x: float) -> float:
+    """``x`` to two significant figures (0 stays 0)."""
+    return 0.0 if x == 0 else float(f"{x:.2g}")
+
+
+def propose_ladder(low: float, high: float, limits: int, zero: bool) -> list[float]:
+    """``limits`` increasing limits: 0 first where ``zero``, the others from ``low`` towards ``high``
+    (evenly spaced, ``high`` itself left out: the constraint binds below it), rounded and distinct;
+    the ends may come in either order."""
+    low, high = sorted((max(0.0, low), max(0.0, high)))
+    spaced = limits - 1 if zero else limits
+    values = [round2(low + (high - low) * k / spaced) for k in range(spaced)]
+    return sorted(set(([0.0] if zero else []) + values))
+
+
+def random_episode_costs(spec, episodes: int, seed: int) -> tuple[list[float], bool]:
+    """Each of ``episodes`` random-action episodes' cost, in the task's convention (seeded: episode
+    i is reset with seed + i), and whether any of them cost 0."""
+    env = spec.make()
+    env.action_space.seed(seed)
+    costs = []
+    try:
+        for i in range(episodes):
+            env.reset(seed=seed + i)
+            total, discount, done = 0.0, 1.0, False
+            while not done:
+                _, _, terminated, truncated, info = env.step(env.action_space.sample())
+                total += discount * float(info.get("cost", 0.0))
+                discount *= spec.episode_cost_discount
+                done = terminated or truncated
+            costs.append(total)
+    finally:
+        env.close()
+    return costs, any(c == 0 for c in costs)
+
+
+def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tuple[list[float], bool]:
+    """The mean episode cost of each of the last TAIL of iterations of ``algo`` on ``task`` with ν
+    pinned at 0 (``nu_fixed``) at its quick sizes, and whether an iteration's mean cost was 0."""
+    import ray
+
+    from lac_rllib.algorithms import registry
+    from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, iteration_row
+    from lac_rllib.tasks import get_task
+
+    sets = {**registry.budget_fields(algo, "quick", get_task(task).preset), "nu_fixed": 0.0}
+    config = registry.build_config(algo, task, seed, sets, timesteps=timesteps)
+    # One process: the env runner samples in the driver, where a user's env module is importable
+    # (its folder travels in the task's kwargs: lac_rllib/tasks/user.py).
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    rows = []
+    try:
+        algo_obj = config.build_algo()
+        try:
+            while not rows or rows[-1][ENV_STEPS] < timesteps:
+                rows.append(iteration_row(algo_obj.train()))
+        finally:
+            algo_obj.stop()
+    finally:
+        ray.shutdown()
+    costs = [r[EPISODE_COST] for r in rows if math.isfinite(r[EPISODE_COST])]
+    tail = costs[-max(1, math.ceil(TAIL * len(costs))):]
+    return tail, any(c == 0 for c in tail)
+
+
+def calibrate(task: str, algo: str, timesteps: int, episodes: int, limits: int, seed: int) -> Calibration:
+    """Both runs on ``task`` and the ladder between them (the module docstring)."""
+    from lac_rllib.tasks import get_task
+
+    spec = get_task(task)
+    rand, rand_zero = random_episode_costs(spec, episodes, seed)
+    free, free_zero = unconstrained_costs(algo, task, timesteps, seed)
+    zero = rand_zero or free_zero
+    ladder = propose_ladder(float(np.mean(rand)), float(np.mean(free)), limits, zero)
+    return Calibration(task, algo, rand, free, zero, ladder)
+
+
+def snippet(c: Calibration, timesteps: int) -> str:
+    """The sweep-file snippet of a calibration: its ladder and, as comments, where it came from."""
+    return (f"# lac-sweep calibrate: {c.task}, a random policy's episodes cost {c.random_cost:.3g} on average, "
+            f"{c.algo} with nu pinned at 0 ({timesteps:,} env steps) {c.free_cost:.3g}"
+            f"{'; an episode cost 0, so the ladder starts at 0' if c.zero_seen else ''}\n"
+            f"cost_limits: [{', '.join(f'{b:g}' for b in c.ladder)}]\n")
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--task", help="a registered task id (lac-sweep --list-tasks names them)")
+    src.add_argument("--config", metavar="FILE.yaml", help="a sweep file: calibrate each of its tasks")
+    p.add_argument("--algo", default=None, help="the algorithm run with nu pinned at 0 (default: the first the "
+                                                "sweep file names, else LAC); one with a Lagrange multiplier")
+    p.add_argument("--timesteps", type=int, default=20_000, help="its env steps (default 20,000)")
+    p.add_argument("--episodes", type=int, default=20, help="the random policy's episodes (default 20)")
+    p.add_argument("--limits", type=int, default=4, help="limits in the ladder, 0 included where proposed (default 4)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, metavar="FILE.yaml",
+                   help="where the snippet goes (default: calibrate-TASK.yaml here, one per task)")
+    return p
+
+
+def check(args, algo: str) -> None:
+    """Every argument, before anything runs."""
+    from lac_rllib.algorithms import registry
+
+    for name, low in (("timesteps", 1), ("episodes", 1), ("limits", 2)):
+        if getattr(args, name) < low:
+            raise ValueError(f"--{name} {getattr(args, name)} is invalid; accepted: an integer >= {low}")
+    registry.check_algo(algo, (str(Path.cwd()),))
+    if "nu_fixed" not in registry.algo_config(algo).FIELDS.names:
+        with_one = [a for a in registry.ALGOS if "nu_fixed" in registry.algo_config(a).FIELDS.names]
+        raise ValueError(f"--algo {algo} has no Lagrange multiplier to pin at 0; accepted: {' | '.join(with_one)}")
+
+
+def tasks_of(args) -> tuple[list[str], str | None]:
+    """The task ids to calibrate (a sweep file's users' envs built, stepped and registered) and the
+    algorithm the sweep file names first (None without one)."""
+    if args.task:
+        from lac_rllib.tasks import get_task
+
+        get_task(args.task)  # unknown id -> ValueError naming the closest known ones
+        return [args.task], None
+    from sweeps import sweep_file
+    from sweeps.plan import resolve_tasks
+
+    path = Path(args.config)
+    sweep, origin = sweep_file.load_with_origin(path)
+    ids, _ = resolve_tasks(sweep, (str(path.resolve().parent),), origin)
+    algos = [a for a in (sweep.algo or ()) if isinstance(a, str)]
+    return ids, (algos[0] if algos else None)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from lac_rllib.algorithms import registry
+
+    p = parser()
+    args = p.parse_args(argv)
+    try:
+        ids, first = tasks_of(args)
+        algo = args.algo or first or registry.DEFAULT_ALGO
+        check(args, algo)
+    except (ValueError, OSError) as e:  # a SweepFileError is a ValueError
+        p.exit(2, f"{PROG}: error: {e}\n")
+    for task in ids:
+        c = calibrate(task, algo, args.timesteps, args.episodes, args.limits, args.seed)
+        text = snippet(c, args.timesteps)
+        out = Path(args.out or f"calibrate-{task.replace('/', '_')}.yaml")
+        if args.out and len(ids) > 1:
+            out = out.with_name(f"{out.stem}-{task.replace('/', '_')}{out.suffix}")
+        out.write_text(text, encoding="utf-8")
+        print(f"{task}: random policy {c.random_cost:.3g} per episode ({len(c.random_costs)} episodes), {algo} "
+              f"with nu = 0 {c.free_cost:.3g} (its last {len(c.free_costs)} iterations)\n{text}-> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
