@@ -103,9 +103,9 @@ def estimate_trial_s(task: str, steps: int, params: dict, cpus: int) -> float:
     T; measured on this project's 2-core machine)."""
     from lac_rllib.tasks import get_task
 
+    sampling = steps * seconds_per_env_step(task, params.get("num_envs_per_env_runner"))
     extra = plan_update_s(params.get(ALGO_FIELD, DEFAULT_ALGO), params, get_task(task).preset) * steps
-    envs = params.get("num_envs_per_env_runner")
-    return STARTUP_S + (steps * seconds_per_env_step(task, envs) + extra) / cpus ** 0.5
+    return STARTUP_S + (sampling + extra) / cpus ** 0.5
 
 
 def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> float:
@@ -124,13 +124,6 @@ def estimate_eval_s(task: str, steps: int, params: dict, sweep: SweepFile) -> fl
     blocks = 1 + (int(steps // per_iteration) // sweep.eval_every if sweep.eval_every and per_iteration else 0)
     # Each episode counted at the task's episode limit (TaskSpec.episode_steps; episodes may end sooner).
     return blocks * len(modes) * episodes * get_task(task).episode_steps * eval_seconds_per_env_step(task)
-
-
-def eval_share_of(evals: list[float], per_trial: list[float], trials, calibration) -> float:
-    """The evaluation blocks' share of the trials' estimated time."""
-    spent = sum(calibration(t.algo) * e for t, e in zip(trials, evals))
-    total = sum(per_trial)
-    return spent / total if total else 0.0
 
 
 def nominal_trial_s(params: dict) -> float | None:
@@ -174,9 +167,9 @@ def estimate(trials: list, sweep: SweepFile, cpus: int, concurrency: int, tracki
     evals = [estimate_eval_s(t.task, t.timesteps, t.params, sweep) for t in trials]
     per_trial = [calibration(t.algo) * (estimate_trial_s(t.task, t.timesteps, t.params, cpus) + e)
                  for t, e in zip(trials, evals)]
+    spent, total = sum(calibration(t.algo) * e for t, e in zip(trials, evals)), sum(per_trial)
     return Estimate(trial_seconds=tuple(per_trial), wall_s=estimate_wall_s(per_trial, concurrency),
-                    cpu_h=sum(per_trial) * cpus / 3600,
-                    eval_share=eval_share_of(evals, per_trial, trials, calibration),
+                    cpu_h=total * cpus / 3600, eval_share=spent / total if total else 0.0,
                     calibration=(calibration.factor, calibration.source))
 
 

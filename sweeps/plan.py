@@ -18,7 +18,7 @@ from sweeps import spaces, sweep_file
 from sweeps.estimate import estimate
 from sweeps.infra import Infra, check_optuna_study, default_optuna_storage
 from sweeps.record import SWEEP_FILE, parent_run_id
-from sweeps.resolve import trial_sets, user_algos
+from sweeps.resolve import user_algos
 from sweeps.spaces import TrialSpec
 from sweeps.sweep_file import SweepFile
 
@@ -112,15 +112,14 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         raise ValueError(f"{origin(('num_samples',) if sweep.is_search else ())}: the sweep plans {count:,} trials "
                          f"({what}), more than --max-trials {max_trials:,}; accepted: a smaller sweep, or "
                          "--max-trials N where a cluster can run them")
-    sets = trial_sets(sweep)
-    trials = None
-    if not sweep.is_search:
-        trials = spaces.resolve_trials(spaces.expand(sweep, tasks), sweep.budget, sets)
+    sets = spaces.trial_sets(sweep)
+    if sweep.is_search:  # estimated at the fields it runs before Optuna's samples (the sampled T is not known yet)
+        trials, first = None, [dataclasses.replace(spaces.trial_spec(
+            {"task": tasks[0], "budget": sweep.budget, "sets": sets, "overrides": {}}), seed=0)]
+    else:
+        trials = first = spaces.resolve_trials(spaces.expand(sweep, tasks), sweep.budget, sets)
     from lac_rllib.constrained.cpus import check_cpus
 
-    # A search is estimated at the fields it runs before Optuna's samples (the sampled T is not known yet).
-    first = trials or [dataclasses.replace(spaces.trial_spec(
-        {"task": tasks[0], "budget": sweep.budget, "sets": sets, "overrides": {}}), seed=0)]
     for t in first:
         check_cpus(t.params.get("num_envs_per_env_runner", 1), cpus, origin(("cpus_per_trial",)))
     # search: each sampled configuration is trained with every seed (sweeps/sweep.py, SeedRepeater)
@@ -194,7 +193,7 @@ def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | N
         raise ValueError(f"--confirm-top with {len(plan.tasks)} tasks: a confirmation reruns one task's winners; "
                          "accepted: a sweep of one task")
     budget = budget if budget is not None else plan.sweep.budget
-    steps = spaces.get_budget(budget).for_task(plan.tasks[0])[0]
+    steps = spaces.get_budget(budget).for_task(plan.tasks[0])
     if steps < plan.timesteps:
         raise ValueError(f"--confirm-budget {budget}: {steps:,} env steps is less than the sweep's {plan.timesteps:,}; "
                          "accepted: the same or a larger budget")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from lac_rllib.algorithms.registry import ALGO_FIELD, DEFAULT_ALGO, check_algo, is_builtin, module_dir
+from lac_rllib.algorithms.registry import ALGO_FIELD, check_algo, is_builtin, module_dir
 from sweeps import spaces, sweep_file
 from sweeps.sweep_file import SweepFile
 
@@ -138,10 +138,3 @@ def user_algos(sweep: SweepFile) -> dict[str, str]:
 def sweeps_algo(sweep: SweepFile) -> bool:
     return bool(swept_algos(sweep)) or len(sweep.algo) > 1
 
-
-def trial_sets(sweep: SweepFile) -> dict:
-    """What every trial sets: the sweep's ``set``, and its algorithm when it runs one baseline."""
-    sets = {k: sweep_file.to_field_value(v) for k, v in sweep.set.items()}
-    if len(sweep.algo) == 1 and sweep.algo[0] != DEFAULT_ALGO:
-        sets[ALGO_FIELD] = sweep.algo[0]
-    return sets

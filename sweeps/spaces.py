@@ -24,22 +24,17 @@ QUICK_TINY_STEPS = 40_000
 class Budget:
     """Env steps per trial, per task preset (``"*"``: any other preset), and the budget's ``name``:
     every algorithm gets the same env steps, and at a named budget each algorithm sets the fields
-    it declares for it (``BUDGET_FIELDS`` in its config module, read through the registry)."""
+    it declares for it (``BUDGET_FIELDS`` on its config class: :func:`trial_params` reads them)."""
 
     steps: dict
     doc: str
     name: str | None = None  #: smoke | quick | paper; None: a number of env steps (the presets' own fields)
 
-    def for_preset(self, preset: str, algo: str = DEFAULT_ALGO) -> tuple[int, dict]:
-        from lac_rllib.algorithms.registry import budget_fields
-
-        steps = self.steps.get(preset, self.steps["*"])
-        return steps, budget_fields(algo, self.name, preset) if self.name else {}
-
-    def for_task(self, task: str, algo: str = DEFAULT_ALGO) -> tuple[int, dict]:
+    def for_task(self, task: str) -> int:
+        """Env steps per trial on ``task`` (its preset's)."""
         from lac_rllib.tasks import get_task
 
-        return self.for_preset(get_task(task).preset, algo)
+        return self.steps.get(get_task(task).preset, self.steps["*"])
 
     def describe(self) -> str:
         steps = ", ".join(f"{n:,}" + ("" if p == "*" else f" on {p} tasks") for p, n in self.steps.items())
@@ -159,8 +154,7 @@ def trial_spec(config: dict) -> TrialSpec:
     index = int(config.get(REPEAT_INDEX, 0))
     seed = config["seeds"][index] if "seeds" in config else index
     return TrialSpec("search", "", None, task, seed, sampled, sampled=sampled, params=params,
-                     default=params == trial_params(task, budget, sets),
-                     timesteps=get_budget(budget).for_task(task, params["algo"])[0])
+                     default=params == trial_params(task, budget, sets), timesteps=get_budget(budget).for_task(task))
 
 
 def groups_for(sweep, preset: str) -> dict:
@@ -224,20 +218,34 @@ def tune_search_space(search: dict) -> dict:
     return {name: kinds[d.kind](*d.args) for name, d in search.items()}
 
 
+def trial_sets(sweep) -> dict:
+    """What every trial sets: the sweep's ``set``, and its algorithm when it runs one baseline."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD
+    from sweeps.sweep_file import to_field_value
+
+    sets = {k: to_field_value(v) for k, v in sweep.set.items()}
+    if len(sweep.algo) == 1 and sweep.algo[0] != DEFAULT_ALGO:
+        sets[ALGO_FIELD] = sweep.algo[0]
+    return sets
+
+
 def trial_params(task: str, budget: str, sets: dict, overrides: dict | None = None) -> dict[str, Any]:
     """``algo`` and every field of that algorithm in a trial of ``task`` at ``budget``: the one place
     the precedence is written. The algorithm is the trial's ``algo`` override, else ``--set algo=``,
     else the default algorithm. Then the algorithm's preset for the task < its overrides for the
     task's family (``TASK_FAMILY_OVERRIDES``, e.g. LAC's T = 50 on the Button tasks) < the fields it
-    declares for the budget (``BUDGET_FIELDS``) < the user's ``--set`` < the trial's own
+    declares for a named budget (``BUDGET_FIELDS``) < the user's ``--set`` < the trial's own
     ``overrides`` (the swept or sampled value).
     ``build_config`` applies the first two (``SafeTaskConfig.task``); the horizon of the
     learning-rate decay is the budget's env steps unless an override names another."""
-    from lac_rllib.algorithms.registry import ALGO_FIELD, build_config, split_algo
+    from lac_rllib.algorithms.registry import ALGO_FIELD, budget_fields, build_config, split_algo
+    from lac_rllib.tasks import get_task
 
+    named = get_budget(budget)
+    steps, preset = named.for_task(task), get_task(task).preset
     algo, fields = split_algo({**sets, **(overrides or {})})
-    steps, budget_overrides = get_budget(budget).for_task(task, algo)
-    config = build_config(algo, task, 0, {**budget_overrides, **fields}, timesteps=steps)
+    declared = budget_fields(algo, named.name, preset) if named.name else {}
+    config = build_config(algo, task, 0, {**declared, **fields}, timesteps=steps)
     return {ALGO_FIELD: algo, **config.params()}
 
 
@@ -250,6 +258,6 @@ def resolve_trials(trials: list[TrialSpec], budget: str, sets: dict) -> list[Tri
         if t.task not in base:
             base[t.task] = trial_params(t.task, budget, sets)
         params = trial_params(t.task, budget, sets, t.overrides)
-        steps = get_budget(budget).for_task(t.task, params["algo"])[0]
-        out.append(dataclasses.replace(t, params=params, default=params == base[t.task], timesteps=steps))
+        out.append(dataclasses.replace(t, params=params, default=params == base[t.task],
+                                       timesteps=get_budget(budget).for_task(t.task)))
     return out

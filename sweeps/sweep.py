@@ -193,11 +193,12 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
         return 2
     if plan.sweep.max_concurrent is None and infra.address:  # the plan could only count this machine's CPUs
         plan = at_cluster_concurrency(plan, int(ray.cluster_resources().get("CPU", 1)))
+    params = parent_params(plan, commit)
     tracker = SweepTracker(plan.tracking_uri, plan.experiment)
     state_file = sweep_dir / SWEEP_FILE
     previous = json.loads(state_file.read_text()) if infra.resume else {}
     parent = tracker.start(
-        plan.name, params=parent_params(plan, commit),
+        plan.name, params=params,
         tags={"lac.space": plan.space, "lac.budget": plan.budget, "lac.sweep_name": plan.name,
               "lac.seeds": ",".join(map(str, plan.seeds)), "lac.tasks": ",".join(plan.tasks)},
         run_id=previous.get("parent_run_id"),
@@ -266,6 +267,7 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
     trainable = tune.with_resources(SweepTrial, run_resources(sweep.cpus_per_trial))
     if infra.resume and tune.Tuner.can_restore(str(sweep_dir)):
         return tune.Tuner.restore(str(sweep_dir), trainable=trainable, resume_unfinished=True, resume_errored=False)
+    space = param_space(plan, parent)
     failure = tune.FailureConfig(max_failures=infra.max_failures)
     ckpt = tune.CheckpointConfig(checkpoint_frequency=1, num_to_keep=2, checkpoint_at_end=True)
     run_config = tune.RunConfig(
@@ -282,7 +284,7 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
         # bound how many run.
         live = max(plan.concurrency, len(plan.seeds))
     return tune.Tuner(
-        trainable, param_space=param_space(plan, parent),
+        trainable, param_space=space,
         tune_config=tune.TuneConfig(num_samples=plan.n_trials if search else 1, search_alg=search,
                                     scheduler=scheduler, max_concurrent_trials=live,
                                     trial_name_creator=_trial_name),

@@ -124,16 +124,18 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     )
     from sweeps.reports.table import table_markdown, write_table_report
 
+    # The table's budget: its env steps and what else it means (no plan: no table).
+    budget_steps = plan.timesteps if plan is not None else None
+    about_budget = budget_note(plan) if plan is not None else ""
     fields = swept_fields(plan) if plan is not None else ()
     trials, curves = sweep_results(tracker, parent, fields)
     note = heading
-    budget_steps = plan.timesteps if plan is not None else None
     with tempfile.TemporaryDirectory() as tmp:
         if len(trials):
+            pareto = pareto_set(plan) if plan is not None and plan.sweep.multi_objective else None
             write_sweep_reports(trials, curves, tmp, fields=tuple(varied(trials, fields)))
             if budget_steps:  # a sweep over tasks x algorithms: the paper's layout (None otherwise)
-                write_table_report(trials, tmp, budget_steps, budget_note(plan))
-            pareto = pareto_set(plan) if plan is not None and plan.sweep.multi_objective else None
+                write_table_report(trials, tmp, budget_steps, about_budget)
             if pareto is not None:
                 (Path(tmp) / "pareto.json").write_text(json.dumps(pareto, indent=2, default=str))
         tracker.client.log_artifacts(parent, tmp, "summary")
@@ -144,13 +146,13 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
                       "frontier, interactive), `summary/importance.png`, `summary/aggregates.png`, "
                       "`summary/learning_curves.png`; one child run per trial (group them by the tag `lac.config` "
                       "in the runs table to see one averaged curve per configuration).")
-            note = note_markdown(summary, heading, footer, extra=note_extras(summary, trials, curves, fields, plan,
-                                                                               pareto))
+            extra = note_extras(summary, trials, curves, fields, plan, pareto)
+            note = note_markdown(summary, heading, footer, extra=extra)
             # The algorithms side by side lead the note (MLflow cuts a tag at 8000 characters): over
             # several tasks the table in the paper's layout, with the published figures; on one task
             # the comparison with LAC (P(LAC beats X); the table is in summary/table.md).
             several = trials["task"].nunique() > 1
-            lead = (table_markdown(trials, budget_steps, budget_note(plan), limit=5000)
+            lead = (table_markdown(trials, budget_steps, about_budget, limit=5000)
                     if budget_steps and several else "") or algorithm_comparison(summary)
             if lead:
                 note = note.replace(heading, heading + "\n\n" + lead, 1)[:7990]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from lac_rllib.algorithms.registry import ALGOS, algos_text
+from lac_rllib.algorithms.registry import ALGOS, DEFAULT_ALGO, algos_text, budget_fields
 from sweeps import estimate
 from sweeps import run as cli
 
@@ -88,7 +88,7 @@ def test_trial_fields_are_resolved_once_in_order(tmp_path, monkeypatch):
     plan = _plan(tmp_path, monkeypatch, "--space", "ablation", "--set", "langevin_steps=15", "--set", "beta=2.0")
     by_label = {t.label(): t.params for t in plan.trials}
     assert PRESETS["tiny"]["langevin_steps"] == 10  # the preset ...
-    budget = spaces.BUDGETS["quick"].for_preset("tiny")[1]
+    budget = budget_fields(DEFAULT_ALGO, "quick", "tiny")  # what LAC declares for the quick budget on tiny tasks
     assert budget["langevin_steps"] == 20 and budget["num_envs_per_env_runner"] == 10  # ... < the budget ...
     vt10 = by_label["VT-langevin_steps=10-PointHazard-v0-s0"]
     assert (vt10["langevin_steps"], vt10["beta"], vt10["num_envs_per_env_runner"]) == (10, 2.0, 10)  # < swept
