@@ -21,7 +21,7 @@ from sweeps.sweep_file import SweepFile
 #: The flag each resolved key of a sweep comes from when it is given (sweep_file.Origin).
 FLAG_OF = {"task": "--task", "budget": "--budget", "num_samples": "--num-samples", "scheduler": "--scheduler",
            "max_concurrent": "--max-concurrent", "cpus_per_trial": "--cpus-per-trial",
-           "experiment": "--experiment", "name": "--name"}
+           "experiment": "--experiment", "name": "--name", "cost_limits": "--cost-limits"}
 
 
 def module_search_dirs(args) -> tuple[str, ...]:
@@ -60,7 +60,7 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
                              "accepted: --set of fields every algorithm it runs has")
         data["algo"] = [algo]
     data["set"] = {**data.get("set", {}), **cli_sets}
-    for key in ("num_samples", "scheduler", "max_concurrent", "cpus_per_trial", "experiment"):
+    for key in ("num_samples", "scheduler", "max_concurrent", "cpus_per_trial", "experiment", "cost_limits"):
         if getattr(args, key) is not None:
             data[key] = getattr(args, key)
     flags = {(k,): f for k, f in FLAG_OF.items() if getattr(args, k) is not None}

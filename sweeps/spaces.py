@@ -15,6 +15,8 @@ from typing import Any
 
 from lac_rllib.algorithms.registry import DEFAULT_ALGO  # no RLlib import: the registry imports lazily
 
+#: The field a ladder sets per trial, and the frontier's group and field (sweeps/reports/ladder.py).
+COST_LIMIT_FIELD, FRONTIER_GROUP, FRONTIER_FIELD = "cost_limit", "frontier", "nu_fixed"
 REPEAT_INDEX = "__trial_index__"  # ray.tune.search.repeater.TRIAL_INDEX (not imported: no Ray before the plan)
 DEFAULT_TASK = "lac/PointHazard-v0"  # a sweep file that names no task: a task that learns in minutes
 QUICK_TINY_STEPS = 40_000
@@ -86,6 +88,9 @@ class TrialSpec:
     params: dict | None = None
     #: Env steps of this trial (its budget on its task, for its algorithm). None until resolved.
     timesteps: int | None = None
+    #: The cost limit of the ladder this trial runs at (``cost_limits``; its ``cost_limit``); None:
+    #: no ladder, the task's limit.
+    limit: float | None = None
 
     @property
     def algo(self) -> str:
@@ -100,6 +105,7 @@ class TrialSpec:
             return search_label(self.sampled, None)
         task = self.task.split("/")[-1]
         label = f"{self.group}-{self.param}={self.value}-{task}" if self.param else f"{self.group}-{task}"
+        label += "" if self.limit is None else f"-b{_short(self.limit)}"  # a ladder's rung: its own configuration
         return label if self.algo == DEFAULT_ALGO or self.param == "algo" else f"{self.algo}-{label}"
 
     def label(self) -> str:
@@ -178,15 +184,21 @@ def count_trials(sweep, task_ids: list[str]) -> int:
 
     from lac_rllib.tasks import get_task
 
-    per_config = len(sweep.algo if len(sweep.algo) > 1 else (None,)) * len(sweep.seed_list())
+    seeds, limits = len(sweep.seed_list()), len(sweep.cost_limits or (None,))
+    per_config = len(sweep.algo if len(sweep.algo) > 1 else (None,)) * limits * seeds
+    frontier = len(sweep.frontier.nu) * seeds if sweep.frontier else 0
     return sum(math.prod(len(v) for v in group.grid.values()) * per_config
-               for task in task_ids for group in groups_for(sweep, get_task(task).preset).values())
+               for task in task_ids for group in groups_for(sweep, get_task(task).preset).values()
+               ) + frontier * len(task_ids)
 
 
 def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
     """A grid sweep's trials, in order: task, group, configuration (grid combinations, the file's
-    order), algorithm (where ``algo`` is a list), seed. A configuration's ``overrides`` are its
-    group's ``set`` under its grid values; ``param``/``value`` name what its grid point sweeps."""
+    order), algorithm (where ``algo`` is a list), cost limit (where ``cost_limits`` is a ladder:
+    its ``cost_limit``), seed; then the task's fixed-multiplier frontier (``frontier``: group
+    ``frontier``, one configuration per fixed ν, at the task's limit: ν does not follow it). A
+    configuration's ``overrides`` are its group's ``set`` under its grid values; ``param``/``value``
+    name what its grid point sweeps."""
     import itertools
 
     from lac_rllib.tasks import get_task
@@ -205,7 +217,15 @@ def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
                 for algo in algos:
                     overrides = {**{k: to_field_value(v) for k, v in group.set.items()}, **point,
                                  **({"algo": algo} if algo else {})}
-                    trials += [TrialSpec(name, param, value, task, seed, overrides) for seed in sweep.seed_list()]
+                    for limit in sweep.cost_limits or (None,):
+                        own = overrides if limit is None else {**overrides, COST_LIMIT_FIELD: float(limit)}
+                        trials += [TrialSpec(name, param, value, task, seed, own, limit=limit)
+                                   for seed in sweep.seed_list()]
+        if sweep.frontier:
+            for nu in sweep.frontier.nu:
+                overrides = {"algo": sweep.frontier.algo, FRONTIER_FIELD: float(nu)}
+                trials += [TrialSpec(FRONTIER_GROUP, FRONTIER_FIELD, float(nu), task, seed, overrides)
+                           for seed in sweep.seed_list()]
     return trials
 
 

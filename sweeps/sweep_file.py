@@ -302,6 +302,48 @@ def _grid_lists(grid: dict) -> dict:
 Grid = dict[str, Annotated[tuple[Any, ...], Field(max_length=MAX_VALUES)]]
 
 
+#: A cost limit or a fixed multiplier: a finite number >= 0.
+NonNegative = Annotated[Real, Field(ge=0)]
+
+
+def _distinct(v: tuple | None) -> tuple | None:
+    if v is not None and len(set(v)) != len(v):
+        raise ValueError(f"{excerpt(list(v))} repeats a value; accepted: distinct numbers >= 0")
+    return v
+
+
+class Frontier(BaseModel):
+    """The fixed-multiplier frontier: ``algo`` run with its Lagrange multiplier frozen at each of
+    ``nu`` for the whole run (its field ``nu_fixed``), every seed, on every task; the trained
+    policies' scores trace the task's empirical return-cost front, against which the report measures
+    every configuration's regret at each cost limit (docs/sweeps.md, "Across a ladder of cost limits")."""
+
+    model_config = _schema_config()
+
+    algo: str
+    """The algorithm, one with a Lagrange multiplier (its fields have ``nu_fixed``)."""
+    nu: tuple[NonNegative, ...] = Field(min_length=1, max_length=MAX_VALUES)
+    """The fixed values of ν, distinct, each >= 0 (0: the unconstrained algorithm)."""
+
+    _nu = field_validator("nu")(classmethod(lambda cls, v: _distinct(v)))
+
+    @field_validator("algo", mode="before")
+    @classmethod
+    def _algo_form(cls, v):
+        return _algo_name(v)
+
+    @field_validator("algo")
+    @classmethod
+    def _with_multiplier(cls, v, info: ValidationInfo):
+        from lac_rllib.algorithms.registry import ALGOS, algo_config, check_algo
+
+        check_algo(v, _search_dirs(info))
+        if "nu_fixed" not in algo_config(v).FIELDS.names:
+            with_one = [a for a in ALGOS if "nu_fixed" in algo_config(a).FIELDS.names]
+            raise ValueError(f"{v} has no Lagrange multiplier to fix; accepted: {' | '.join(with_one)}")
+        return v
+
+
 class Group(BaseModel):
     """Named configurations: every combination of ``grid``'s values, each with ``set`` on top."""
 
@@ -395,6 +437,13 @@ class SweepFile(BaseModel):
     eval_every: Int(1, MAX_BUDGET) | None = None
     """Iterations between evaluation blocks during training (logged at their env steps: an
     evaluation curve); default none: the block at the trial's end only."""
+    cost_limits: tuple[NonNegative, ...] | None = Field(None, min_length=1, max_length=MAX_VALUES)
+    """A ladder of cost limits b, distinct, each >= 0: every configuration runs at each (a trial per
+    configuration × limit × seed, the limit its ``cost_limit``; ``--cost-limits`` on the command line)
+    and the report ranks them at each, with the regret to the ``frontier`` where it runs (docs/sweeps.md,
+    "Across a ladder of cost limits"); ``lac-sweep calibrate`` proposes one. Default: each task's limit."""
+    frontier: Frontier | None = None
+    """The fixed-multiplier frontier's runs beside the sweep's own (:class:`Frontier`)."""
     score: Literal["eval", "train"] | None = None
     """What every trial is ranked on (sweeps/score.py): ``eval``, the evaluation block's deterministic
     episodes (default; ``train`` when ``eval_episodes`` is 0), or ``train``, the mean over its final
@@ -434,6 +483,8 @@ class SweepFile(BaseModel):
 
     _lists = field_validator("grid")(classmethod(lambda cls, v: v if v is None else _grid_lists(v)))
 
+    _ladder = field_validator("cost_limits")(classmethod(lambda cls, v: _distinct(v)))
+
     @model_validator(mode="after")
     def _shape(self):
         if self.grace_period is not None and self.scheduler != "asha":
@@ -453,6 +504,13 @@ class SweepFile(BaseModel):
         if self.grid == {} or self.groups == {}:
             raise KeyedError(("grid" if self.grid == {} else "groups",),
                              "an empty grid; accepted: field → a non-empty list of values")
+        if (self.cost_limits is not None or self.frontier is not None) and self.search is not None:
+            key = "cost_limits" if self.cost_limits is not None else "frontier"
+            raise KeyedError((key,), f"{key} with a search: a ladder and a frontier run grid configurations; "
+                             "accepted: with grid or groups (or none: one configuration)")
+        if self.cost_limits is not None and "cost_limit" in self.set:
+            raise KeyedError(("set", "cost_limit"), "cost_limit set beside cost_limits; accepted: one of them "
+                             "(a ladder of one limit: cost_limits: [b])")
         if self.search is not None:
             if self.grid is not None or self.groups is not None or self.groups_at:
                 raise KeyedError(("search",), "give search or grid/groups, not both")
@@ -781,7 +839,7 @@ def reference_markdown() -> str:
     """docs/sweeps.md's "Sweep file reference": every key of every part of the schema, from its
     docstring (test_docs keeps the file in sync: ``python -m sweeps.sweep_file``)."""
     lines = []
-    for model in (SweepFile, Group, GroupsAt, Seeds, Distribution, UserEnv):
+    for model in (SweepFile, Group, GroupsAt, Seeds, Distribution, UserEnv, Frontier):
         lines += [f"#### `{model.__name__}`", "", " ".join((model.__doc__ or "").split()), "",
                   "| key | type | default | what it is |", "|---|---|---|---|"]
         for name, f in model.model_fields.items():

@@ -210,3 +210,45 @@ def ladder_png(table: pd.DataFrame, points: pd.DataFrame, path) -> str | None:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return str(path)
+
+
+def applies(trials: pd.DataFrame) -> bool:
+    """Whether a sweep's trials hold a ladder (several limits on one task) or a frontier."""
+    if trials.empty:
+        return False
+    limits = pd.to_numeric(trials[COST_LIMIT], errors="coerce")
+    frontier = trials["group"].astype(str).eq(FRONTIER_GROUP)
+    several = limits[~frontier].groupby(trials.loc[~frontier, "task"]).nunique().gt(1).any()
+    return bool(frontier.any() or several)
+
+
+def parent_metrics(table: pd.DataFrame) -> dict[str, float]:
+    """What the parent run carries per configuration: its wins over the ladder and its worst regret
+    (MLflow's runs table sorts sweeps by them); the task leads the name where there are several."""
+    import re
+
+    w = wins(table)
+    several = w["task"].nunique() > 1
+    out = {}
+    for r in w.itertuples():
+        name = re.sub(r"[^\w\-./ ]", "_", f"{r.task}/{r.configuration}" if several else r.configuration)
+        out[f"ladder_wins/{name}"] = float(r.wins)
+        if math.isfinite(r.worst_regret):
+            out[f"ladder_worst_regret/{name}"] = float(r.worst_regret)
+    return out
+
+
+def write_ladder_report(trials: pd.DataFrame, out_dir) -> tuple[str, dict[str, float]]:
+    """``ladder.csv``, ``ladder.md`` and ``ladder.png`` (the figures, the tables, the plot) and the
+    frontier's points in ``frontier_points.csv``; returns the markdown and the parent's metrics."""
+    from pathlib import Path
+
+    out = Path(out_dir)
+    table = ladder_table(trials)
+    points = frontier_points(trials)
+    table.to_csv(out / "ladder.csv", index=False)
+    points.to_csv(out / "frontier_points.csv", index=False)
+    text = ladder_markdown(table)
+    (out / "ladder.md").write_text(text + "\n", encoding="utf-8")
+    ladder_png(table, points, out / "ladder.png")
+    return text, parent_metrics(table) if not table.empty else {}

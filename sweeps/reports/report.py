@@ -426,9 +426,12 @@ def trial_curve(curve_df: pd.DataFrame, path, title: str) -> str:
 def with_safety(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> pd.DataFrame:
     """The summary with each configuration's safety statistics (sweeps/reports/safety.py: P(feasible at the
     end) with its Wilson interval, the violation over training, the worst iteration, the spread of
-    the final cost), its place on the reward-cost frontier and its chain-health flags."""
+    the final cost), its place on the reward-cost frontier, its chain-health flags and how its
+    multiplier behaved (sweeps/reports/multiplier.py: the seeds' mean overshoot, swing and fractions
+    of iterations with ν at 0 and at its bound; steps to feasible and the cost rate are safety's)."""
     from sweeps.reports.chain_health import chain_flags
     from sweeps.reports.frontier import frontier
+    from sweeps.reports.multiplier import behaviour_table
     from sweeps.reports.safety import safety_table
 
     def key(values) -> tuple:
@@ -444,6 +447,10 @@ def with_safety(summary: pd.DataFrame, trials: pd.DataFrame, curves: dict) -> pd
     out["on_frontier"] = frontier(out).to_numpy()
     flags = {key(k): v for k, v in chain_flags(trials).items()}
     out["chain_flags"] = [flags.get(key(r[k] for k in KEYS), "") for r in out.to_dict("records")]
+    behaviour = behaviour_table(_prepared(trials)[0], curves, KEYS)
+    by_key = {key(r[k] for k in KEYS): r for r in behaviour.to_dict("records")}
+    for c in ("overshoot", "swing", "nu_at_zero", "nu_at_bound"):  # the others are safety's columns
+        out[c] = [by_key.get(key(r[k] for k in KEYS), {}).get(c, math.nan) for r in out.to_dict("records")]
     return out
 
 

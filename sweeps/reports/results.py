@@ -114,6 +114,7 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     """The report on the parent run (``summary/``) and the note that leads it; the parent closed."""
     from mlflow.entities import Metric
 
+    from sweeps.reports.ladder import applies, write_ladder_report
     from sweeps.reports.report import (
         algorithm_comparison,
         note_markdown,
@@ -129,11 +130,13 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     about_budget = budget_note(plan) if plan is not None else ""
     fields = swept_fields(plan) if plan is not None else ()
     trials, curves = sweep_results(tracker, parent, fields)
-    note = heading
+    note, ladder, ladder_metrics = heading, "", {}
     with tempfile.TemporaryDirectory() as tmp:
         if len(trials):
             pareto = pareto_set(plan) if plan is not None and plan.sweep.multi_objective else None
             write_sweep_reports(trials, curves, tmp, fields=tuple(varied(trials, fields)))
+            if applies(trials):  # a ladder of cost limits, or the fixed-multiplier frontier
+                ladder, ladder_metrics = write_ladder_report(trials, tmp)
             if budget_steps:  # a sweep over tasks x algorithms: the paper's layout (None otherwise)
                 write_table_report(trials, tmp, budget_steps, about_budget)
             if pareto is not None:
@@ -148,6 +151,8 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
                       "in the runs table to see one averaged curve per configuration).")
             extra = note_extras(summary, trials, curves, fields, plan, pareto)
             note = note_markdown(summary, heading, footer, extra=extra)
+            if ladder:  # the verdict across limits leads: one limit's ranking may not hold at another
+                note = note.replace(heading, heading + "\n\n" + ladder, 1)[:7990]
             # The algorithms side by side lead the note (MLflow cuts a tag at 8000 characters): over
             # several tasks the table in the paper's layout, with the published figures; on one task
             # the comparison with LAC (P(LAC beats X); the table is in summary/table.md).
@@ -160,8 +165,9 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
             if nothing:  # said first, before any table (issue 36)
                 note = note.replace(heading, heading + "\n\n" + nothing, 1)[:7990]
             # The runs table sorts and charts sweeps by these (docs/sweeps.md, "The parent run").
+            metrics = {**parent_metrics(summary), **ladder_metrics}
             tracker.client.log_batch(parent, metrics=[Metric(k, v, int(time.time() * 1000), 0)
-                                                      for k, v in parent_metrics(summary).items()])
+                                                      for k, v in metrics.items()])
     tracker.set_note(parent, note)
     tracker.client.set_tag(parent, "lac.failed_trials", str(n_errors))
     tracker.client.set_tag(parent, STATUS_TAG, "finished")
