@@ -7,17 +7,19 @@ file and refuses, naming the owner's host and pid, unless the owner is gone: its
 exists on this host, or (another host) its heartbeat is older than ``STALE_S``. Then it takes the
 lock over (a driver killed with SIGKILL cannot clean up).
 Works wherever the storage path is a filesystem every driver sees (local, NFS); object stores
-(``s3://``) have no atomic create, and there the lock is skipped with a warning.
+(``s3://``) have no atomic create, and there the lock is skipped with a warning (:func:`sweep_lock`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 LOCK_FILE = "driver.lock"
@@ -111,3 +113,15 @@ class DriverLock:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+@contextlib.contextmanager
+def sweep_lock(sweep_dir: Path | str, storage: str) -> Iterator[None]:
+    """The driver lock of the sweep in ``sweep_dir``, held for the block (raises :class:`SweepLocked`
+    on entry where a live driver holds it); none where ``storage`` is an object store, with a warning."""
+    if "://" in storage:  # no atomic create there
+        print(f"note: no driver lock on {storage}: do not run this sweep from two drivers at once", file=sys.stderr)
+        yield
+        return
+    with DriverLock(sweep_dir):
+        yield

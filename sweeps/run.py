@@ -1,4 +1,5 @@
-"""The sweep service: ``python sweeps/run.py --space ablation`` (Ray Tune + Optuna, tracked in MLflow).
+"""The sweep service: ``python sweeps/run.py --space ablation`` (Ray Tune + Optuna, tracked in MLflow);
+``lac-sweep calibrate --task ID`` proposes a ladder of cost limits for a task (sweeps/calibrate.py).
 
 Every argument is checked, and the plan printed, before Ray starts. One MLflow parent run per
 sweep, one child run per trial; the Tune experiment lives in ``--storage``/``--name`` so that
@@ -18,7 +19,7 @@ from lac_rllib.algorithms.registry import algos_text
 from sweeps import spaces, sweep_file
 from sweeps.estimate import duration_text
 from sweeps.infra import Infra, check_address, check_shared, check_storage
-from sweeps.lock import DriverLock, SweepLocked
+from sweeps.lock import SweepLocked, sweep_lock
 from sweeps.plan import MAX_TRIALS, Plan, check_confirm, confirmation_plan, plan_sweep
 from sweeps.record import checked_sweep_dir, parent_run_id
 from sweeps.resolve import module_search_dirs, resolve_sweep
@@ -45,6 +46,15 @@ def _name(text: str) -> str:
         return sweep_file.check_name(text)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _limits(text: str) -> list:
+    """``--cost-limits 0,2,4.5`` as numbers (the sweep file's schema checks them as it checks its own)."""
+    try:
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text} is invalid; accepted: numbers >= 0 joined by commas, "
+                                         "e.g. 0,2,4") from None
 
 
 def _budget(text: str) -> str | int:
@@ -103,6 +113,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="seeds of the confirmation (default: the sweep's count, at least 3)")
     p.add_argument("--confirm-budget", type=_budget, default=None, metavar="BUDGET",
                    help="the confirmation's budget: the sweep's (default) or a larger one")
+    p.add_argument("--cost-limits", type=_limits, default=None, metavar="B1,B2,...",
+                   help="a ladder of cost limits: every configuration runs at each (the sweep file's cost_limits; "
+                        "lac-sweep calibrate --task ID proposes one)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
                         f"algo={algos_text('|')} picks the algorithm (fields: docs/config.md), or "
@@ -186,6 +199,11 @@ def one_line(text: str, limit: int = 600) -> str:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["calibrate"]:  # lac-sweep calibrate: a task's cost range and a ladder of limits
+        from sweeps import calibrate
+
+        return calibrate.main(argv[1:])
     args = parse_args(argv)
     # RLlib warns once per process that LAC runs on the new API stack (it is built for it): noise
     # above the plan. Trials run in other processes, where RLlib's own logging is untouched.
@@ -196,53 +214,40 @@ def main(argv=None) -> int:
     except ValueError as e:
         print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
-    lock = None
-    if "://" not in plan.storage:  # object stores have no atomic create (sweeps/lock.py)
-        lock = DriverLock(sweep_dir)
-        try:
-            lock.acquire()
-        except SweepLocked as e:
-            print(f"{PROG}: error: {e}", file=sys.stderr)
-            return 2
-    else:
-        print(f"note: no driver lock on {plan.storage}: do not run this sweep from two drivers at once",
-              file=sys.stderr)
-    try:
-        print_plan(plan)
-        # Ray is imported here, after the plan is printed: the checks above answer without it.
-        from sweeps.sweep import git_commit, run_sweep
-
-        rc = run_sweep(plan, sweep_dir, git_commit())
-    finally:
-        if lock is not None:
-            lock.release()
+    rc = run_locked(plan, sweep_dir)
     if rc == 0 and plan.confirm:
-        rc = run_confirmation(plan, sweep_dir, git_commit())
+        rc = run_confirmation(plan, sweep_dir)
     return rc
 
 
-def run_confirmation(plan: Plan, sweep_dir: Path, commit: str) -> int:
+def run_locked(plan: Plan, sweep_dir: Path) -> int:
+    """Print ``plan`` and run it into ``sweep_dir``, holding the sweep's driver lock (sweeps/lock.py):
+    the run's exit code, or 2 with a one-line error where another driver holds the sweep."""
+    try:
+        with sweep_lock(sweep_dir, plan.storage):
+            print_plan(plan)
+            # Ray is imported here, after the plan is printed: the checks before answer without it.
+            from sweeps.sweep import git_commit, run_sweep
+
+            return run_sweep(plan, sweep_dir, git_commit())
+    except SweepLocked as e:  # raised on entering the lock, before the plan is printed
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+
+
+def run_confirmation(plan: Plan, sweep_dir: Path) -> int:
     """``--confirm-top``: the finished sweep's confirmation (sweeps/plan.py ``confirmation_plan``),
     printed, then run as the sweep NAME-confirm with its own parent run, whose note says whether
     each winner held up; the sweep's parent run names it."""
-    from sweeps.sweep import run_sweep
-
     confirmation = confirmation_plan(plan, sweep_dir)
     if confirmation is None:
         print("confirmation: no feasible configuration other than the default to confirm", flush=True)
         return 0
     print(f"confirmation of {plan.name}: its {len(confirmation.confirms)} best feasible configuration(s) on seeds "
           f"{confirmation.seeds[0]}..{confirmation.seeds[-1]}", flush=True)
-    print_plan(confirmation)
     SweepTracker(plan.tracking_uri, plan.experiment).client.set_tag(parent_run_id(sweep_dir), CONFIRMED_BY_TAG,
                                                                    confirmation.name)
-    cdir = Path(confirmation.storage) / confirmation.name
-    lock = DriverLock(cdir)
-    lock.acquire()
-    try:
-        return run_sweep(confirmation, cdir, commit)
-    finally:
-        lock.release()
+    return run_locked(confirmation, Path(confirmation.storage) / confirmation.name)
 
 
 if __name__ == "__main__":

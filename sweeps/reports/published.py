@@ -5,13 +5,14 @@ Each figure has a source (with its URL, simulator, env steps and per-task limit)
 algorithm name, and [mean, std] of return and cost as the source prints them. A figure may also
 carry ``at_steps``: the same curve at earlier budgets, read off the source's published learning-curve
 image with a stated tolerance (:class:`AtSteps`), so a run at 500k is set beside the source at 500k
-rather than at its final 1e7 (:meth:`Figure.at`). A bad file is one line,
+rather than at its final 1e7 (:meth:`Figure.at`; a table's at once: :meth:`Published.beside`). A bad file is one line,
 ``FILE:LINE: key.path: what is wrong`` (:class:`PublishedError`). sweeps/reports/table.py and
 benchmarks/fidelity.py place them beside their runs.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 from typing import Annotated, Literal
@@ -202,6 +203,36 @@ class Published(BaseModel):
     def task_order(self) -> list[str]:
         """Our task ids in the order the sources list them (the papers' row order)."""
         return list(dict.fromkeys(t for s in self.sources.values() for t in s.tasks))
+
+    def beside(self, tasks, algos, steps: int) -> Beside:
+        """The figures of ``algos`` on ``tasks`` in each source row, as they stand beside runs of
+        ``steps`` env steps: each with its reading there where it has one (:meth:`Figure.at`)."""
+        found = ((row, t, a, self.find(row, t, a)) for row in ROWS for t in tasks for a in algos)
+        return Beside(steps, {(row, t, a): Shown(f, f.at(steps)) for row, t, a, f in found if f is not None})
+
+
+@dataclasses.dataclass(frozen=True)
+class Shown:
+    """A figure beside a run: the figure, and its reading at the run's budget (None: the figure's own,
+    final one stands there)."""
+
+    figure: Figure
+    reading: AtSteps | None
+
+    @property
+    def steps(self) -> int:
+        """The env steps of what stands beside the run: the reading's, else the figure's."""
+        return self.reading.steps if self.reading else self.figure.steps
+
+
+@dataclasses.dataclass(frozen=True)
+class Beside:
+    """The published figures beside a table's runs of ``steps`` env steps (:meth:`Published.beside`)."""
+
+    steps: int
+    """The runs' env steps."""
+    figures: dict[tuple[str, str, str], Shown]
+    """(source row, task, algo) → the figure shown there, in print order (rows, tasks, algos)."""
 
 
 def _check_readings(f: Figure, src: Source, i: int) -> None:

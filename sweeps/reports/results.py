@@ -123,14 +123,14 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
         summarize,
         write_sweep_reports,
     )
-    from sweeps.reports.table import table_markdown, write_table_report
+    from sweeps.reports.table import write_table_report
 
     # The table's budget: its env steps and what else it means (no plan: no table).
     budget_steps = plan.timesteps if plan is not None else None
     about_budget = budget_note(plan) if plan is not None else ""
     fields = swept_fields(plan) if plan is not None else ()
     trials, curves = sweep_results(tracker, parent, fields)
-    note, ladder, ladder_metrics = heading, "", {}
+    note, ladder, ladder_metrics, table_note = heading, "", {}, ""
     with tempfile.TemporaryDirectory() as tmp:
         if len(trials):
             pareto = pareto_set(plan) if plan is not None and plan.sweep.multi_objective else None
@@ -138,7 +138,8 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
             if applies(trials):  # a ladder of cost limits, or the fixed-multiplier frontier
                 ladder, ladder_metrics = write_ladder_report(trials, tmp)
             if budget_steps:  # a sweep over tasks x algorithms: the paper's layout (None otherwise)
-                write_table_report(trials, tmp, budget_steps, about_budget)
+                written = write_table_report(trials, tmp, budget_steps, about_budget, note_limit=5000)
+                table_note = written[1] if written else ""
             if pareto is not None:
                 (Path(tmp) / "pareto.json").write_text(json.dumps(pareto, indent=2, default=str))
         tracker.client.log_artifacts(parent, tmp, "summary")
@@ -157,8 +158,7 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
             # several tasks the table in the paper's layout, with the published figures; on one task
             # the comparison with LAC (P(LAC beats X); the table is in summary/table.md).
             several = trials["task"].nunique() > 1
-            lead = (table_markdown(trials, budget_steps, about_budget, limit=5000)
-                    if budget_steps and several else "") or algorithm_comparison(summary)
+            lead = (table_note if several else "") or algorithm_comparison(summary)
             if lead:
                 note = note.replace(heading, heading + "\n\n" + lead, 1)[:7990]
             nothing = nothing_feasible_markdown(summary)

@@ -43,7 +43,7 @@ import pandas as pd  # noqa: E402
 from lac_rllib.algorithms.registry import DEFAULT_ALGO  # noqa: E402
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN  # noqa: E402
 from sweeps.reports.configurations import fmt_num, is_na, prepared  # noqa: E402
-from sweeps.reports.published import ROWS, AtSteps, Figure, Published, Source, published  # noqa: E402
+from sweeps.reports.published import ROWS, AtSteps, Beside, Published, Shown, Source, published  # noqa: E402
 from sweeps.reports.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
 from sweeps.score import described  # noqa: E402
 
@@ -81,6 +81,11 @@ class Table:
     def name(self, algo: str) -> str:
         """The column's name: the paper's for its algorithms, else ours (a user's module path)."""
         return self.published.algorithms.get(algo, algo)
+
+    def figures_beside(self, budget_steps: int) -> Beside:
+        """The published figures of its tasks and algorithms beside its runs of ``budget_steps`` env
+        steps, resolved once for all that writes the table."""
+        return self.published.beside(self.tasks, self.algos, budget_steps)
 
 
 def _one_configuration_each(df: pd.DataFrame) -> bool:
@@ -161,20 +166,15 @@ def steps_text(n: int) -> str:
     return str(n)
 
 
-def _shown_figures(table: Table) -> list[Figure]:
-    return [f for f in (table.published.find(r, t, a) for r in ROWS for t in table.tasks for a in table.algos)
-            if f is not None]
-
-
-def budget_caption(table: Table, budget_steps: int, budget_note: str = "") -> str:
-    """What the table's runs had and what the published figures beside them had: a table at
-    another budget never reads as the paper's."""
+def budget_caption(beside: Beside, budget_note: str = "") -> str:
+    """What the table's runs had (``beside.steps``) and what the published figures beside them had:
+    a table at another budget never reads as the paper's."""
+    budget_steps = beside.steps
     text = f"Budget: {budget_steps:,} env steps per trial" + (f" ({budget_note})" if budget_note else "")
     steps, read = {}, []
-    for f in _shown_figures(table):
-        row = table.published.sources[f.source].row
-        steps.setdefault(row, set()).add(f.steps_at(budget_steps))
-        if f.at(budget_steps) and row not in read:
+    for (row, _, _), s in beside.figures.items():
+        steps.setdefault(row, set()).add(s.steps)
+        if s.reading is not None and row not in read:
             read.append(row)
     if not steps:
         return text + "."
@@ -182,8 +182,7 @@ def budget_caption(table: Table, budget_steps: int, budget_note: str = "") -> st
                        for r, v in steps.items())
     if read:  # some figures are at this budget, read from a source's curves
         lead = f"{text}, the paper's" if steps.get("paper") == {budget_steps} else text
-        elsewhere = any(f.steps_at(budget_steps) != budget_steps and not f.at(budget_steps)
-                        for f in _shown_figures(table))
+        elsewhere = any(s.steps != budget_steps and s.reading is None for s in beside.figures.values())
         who = " and ".join(f"{ROWS[r]}'s" for r in read)
         return (f"{lead}. The published figures beside the cells: {theirs} env steps; {who} at this budget are "
                 "read from its published curves (± the reading's tolerance, not a std)"
@@ -212,26 +211,25 @@ def _ours(cell: Cell | None, which: str, intervals: bool = True) -> str:
     return text
 
 
-def _published_rows(table: Table, task: str, budget: int | None = None
-                    ) -> list[tuple[str, list[Figure | None], bool]]:
-    """(row label, the figure per algorithm or None, whether each cell names its steps) for each
-    source row with a figure on ``task``; a label names the steps when its figures share them (a
-    figure's at a run of ``budget`` steps: :meth:`Figure.steps_at`)."""
+def _published_rows(table: Table, task: str, beside: Beside) -> list[tuple[str, list[Shown | None], bool]]:
+    """(row label, the figure shown per algorithm or None, whether each cell names its steps) for
+    each source row with a figure on ``task``; a label names the steps when its figures share them
+    (those of what stands beside the runs: :attr:`Shown.steps`)."""
     rows = []
     for key, label in ROWS.items():
-        figs = [table.published.find(key, task, a) for a in table.algos]
-        steps = {f.steps_at(budget) for f in figs if f is not None}
+        shown = [beside.figures.get((key, task, a)) for a in table.algos]
+        steps = {s.steps for s in shown if s is not None}
         if steps:
             one = len(steps) == 1
-            rows.append((f"{label} ({steps_text(next(iter(steps)))})" if one else label, figs, not one))
+            rows.append((f"{label} ({steps_text(next(iter(steps)))})" if one else label, shown, not one))
     return rows
 
 
-def _figure_text(f: Figure | None, with_steps: bool, budget: int | None = None) -> str:
-    """A figure as a cell: beside a run of ``budget`` steps, its reading there where it has one."""
-    if f is None:
+def _figure_text(s: Shown | None, with_steps: bool) -> str:
+    """A figure as a cell: beside a run, its reading at the run's budget where it has one."""
+    if s is None:
         return ""
-    r = f.at(budget)
+    f, r = s.figure, s.reading
     if r is not None:
         return f"{reading_text(r)} ({steps_text(r.steps) + ', ' if with_steps else ''}read from a curve)"
     return f"{_pm(f.return_)} / {_pm(f.cost)}" + (f" ({steps_text(f.steps)})" if with_steps else "")
@@ -243,9 +241,9 @@ def reading_text(r: AtSteps) -> str:
     return f"{r.return_:g} ±{r.tolerance.return_:g} / {cost}"
 
 
-def _value(f: Figure, which: str, budget: int | None) -> float:
-    """The mean return (``which="ret"``) or cost beside a run of ``budget`` steps (NaN: not read)."""
-    r = f.at(budget)
+def _value(s: Shown, which: str) -> float:
+    """The mean return (``which="ret"``) or cost of a figure beside a run (NaN: not read)."""
+    f, r = s.figure, s.reading
     if r is not None:
         v = r.return_ if which == "ret" else r.cost
         return math.nan if v is None else v
@@ -259,16 +257,17 @@ def legend_line(intervals: bool = True) -> str:
             "(ties kept). Below each task: the same algorithm as published, return / cost (blank: none published).")
 
 
-def _sources(table: Table, budget: int | None = None) -> tuple[list[Source], list[str]]:
+def _sources(table: Table, beside: Beside) -> tuple[list[Source], list[str]]:
     """The sources of the figures shown, and the figures' own notes (once per algorithm and note),
-    then, per source, the curves the figures beside a run of ``budget`` steps were read from."""
-    shown = _shown_figures(table)
+    then, per source, the curves the figures beside the runs were read from."""
+    shown = [s.figure for s in beside.figures.values()]
     notes = dict.fromkeys((f.algo, ROWS[table.published.sources[f.source].row], f.note) for f in shown if f.note)
     curves = {}  # source -> (the readings' steps, the images' URLs)
-    for f in shown:
-        if f.at(budget) is not None:
+    for s in beside.figures.values():
+        if s.reading is not None:
+            f = s.figure
             steps, urls = curves.setdefault(f.source, ({}, {}))  # dicts: ordered, each once
-            steps[f.at(budget).steps] = None
+            steps[s.reading.steps] = None
             urls[table.published.sources[f.source].curves[f.curve]] = None
     read = [f"{ROWS[table.published.sources[k].row]} at {' and '.join(steps_text(n) for n in steps)}: read from a "
             f"curve, the height of its mean curve in {', '.join(f'[{Path(url).name}]({url})' for url in urls)} (± "
@@ -283,22 +282,23 @@ def _source_text(s: Source) -> str:
             + (f". {s.note}" if s.note else ""))
 
 
-def sources_lines(table: Table, budget: int | None = None) -> list[str]:
+def sources_lines(table: Table, beside: Beside) -> list[str]:
     """The sources of the figures shown as markdown list items, then the figures' own notes and the
-    curves the figures beside a run of ``budget`` steps were read from."""
-    sources, notes = _sources(table, budget)
+    curves the figures beside the runs were read from."""
+    sources, notes = _sources(table, beside)
     return ([f"- {ROWS[s.row]}: [{s.title}]({s.url}); {_source_text(s)}" for s in sources]
             + [f"- {note}" for note in notes])
 
 
-def markdown(table: Table, budget_steps: int, budget_note: str = "", intervals: bool = True,
+def markdown(table: Table, beside: Beside, budget_note: str = "", intervals: bool = True,
              sources: bool = True) -> str:
     """The table as markdown (``table.md``, the note): its budget, a block of rows per task (our
-    return and cost, then each source's figures), the legend, the seeds and the sources."""
+    return and cost, then each source's figures, ``beside``: :meth:`Table.figures_beside`), the legend, the
+    seeds and the sources."""
     def row(*cells) -> str:
         return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
 
-    lines = [f"**Final return and cost per task and algorithm.** {budget_caption(table, budget_steps, budget_note)}",
+    lines = [f"**Final return and cost per task and algorithm.** {budget_caption(beside, budget_note)}",
              "", row("task (limit)", "", *(table.name(a) for a in table.algos)),
              "|---|---|" + "---:|" * len(table.algos)]
     for task in table.tasks:
@@ -306,12 +306,12 @@ def markdown(table: Table, budget_steps: int, budget_note: str = "", intervals: 
         lines.append(row(f"`{task}` ({_limit_text(table.limits[task])})", "return",
                          *(_ours(c, "ret", intervals) for c in cells)))
         lines.append(row("", "cost", *(_ours(c, "cost", intervals) for c in cells)))
-        lines += [row("", label, *(_figure_text(f, each, budget_steps) for f in figs))
-                  for label, figs, each in _published_rows(table, task, budget_steps)]
+        lines += [row("", label, *(_figure_text(s, each) for s in shown))
+                  for label, shown, each in _published_rows(table, task, beside)]
     counts = [c.n_seeds for c in table.cells.values() if c.n_seeds]
     lines += ["", legend_line(intervals), "", f"Scores: {described(table.scores)}. {seeds_line(counts)}"]
-    if sources and _shown_figures(table):
-        lines += ["", "Published figures:", *sources_lines(table, budget_steps)]
+    if sources and beside.figures:
+        lines += ["", "Published figures:", *sources_lines(table, beside)]
     return "\n".join(lines) + "\n"
 
 
@@ -324,11 +324,14 @@ def table_markdown(trials: pd.DataFrame, budget_steps: int, budget_note: str = "
     (the module docstring). With ``limit`` (characters), the intervals, then the sources' lines are
     left out (they stay in summary/table.md) until it fits; what still does not is cut."""
     table = build_table(trials)
-    if table is None:
-        return ""
+    return "" if table is None else note_markdown(table, table.figures_beside(budget_steps), budget_note, limit)
+
+
+def note_markdown(table: Table, beside: Beside, budget_note: str = "", limit: int | None = None) -> str:
+    """:func:`table_markdown` of a table built already, its figures resolved already."""
     text = ""
     for intervals, sources in ((True, True), (False, True), (False, False)):
-        text = markdown(table, budget_steps, budget_note, intervals, sources)
+        text = markdown(table, beside, budget_note, intervals, sources)
         if limit is None or len(text) <= limit:
             return text
     kept = text[:limit - 40].rpartition("\n")[0]  # whole lines
@@ -370,22 +373,23 @@ def _html_ours(cell: Cell | None, which: str) -> str:
     return f'<td title="{html.escape(hover)}">{text}</td>'
 
 
-def _html_figure(table: Table, f: Figure | None, with_steps: bool, budget: int | None = None) -> str:
-    if f is None:
+def _html_figure(table: Table, shown: Shown | None, with_steps: bool) -> str:
+    if shown is None:
         return '<td class="pub"></td>'
-    s, r = table.published.sources[f.source], f.at(budget)
+    f, r = shown.figure, shown.reading
+    s = table.published.sources[f.source]
     at = (f"{f.steps:,} env steps" if r is None else
           f"{r.steps:,} env steps, read from its curve {s.curves[f.curve]} (± the reading's tolerance, not a std)"
           + (f"; {r.note}" if r.note else ""))
     hover = (f"{s.title}: {s.tasks[f.task].name}, {at}, limit {f.cost_limit:g}, {s.simulator}"
              + (f". {f.note}" if f.note else ""))
-    return f'<td class="pub" title="{html.escape(hover)}">{html.escape(_figure_text(f, with_steps, budget))}</td>'
+    return f'<td class="pub" title="{html.escape(hover)}">{html.escape(_figure_text(shown, with_steps))}</td>'
 
 
-def table_html(table: Table, budget_steps: int, path, budget_note: str = "") -> str:
+def table_html(table: Table, beside: Beside, path, budget_note: str = "") -> str:
     """The table as a standalone HTML page: the intervals, seeds and sources on hover."""
     caption = (f"<b>Final return and cost per task and algorithm.</b> "
-               f"{html.escape(budget_caption(table, budget_steps, budget_note))}<br>"
+               f"{html.escape(budget_caption(beside, budget_note))}<br>"
                f"{html.escape(legend_line()).replace('**bold**', '<b>bold</b>')} Hover a cell for its interval "
                "and seeds, a published figure for its source.")
     head = "".join(f"<th>{html.escape(table.name(a))}</th>" for a in table.algos)
@@ -396,9 +400,9 @@ def table_html(table: Table, budget_steps: int, path, budget_note: str = "") -> 
                     f'<td class="what">return</td>{"".join(_html_ours(c, "ret") for c in cells)}</tr>')
         rows.append(f'<tr><td></td><td class="what">cost</td>{"".join(_html_ours(c, "cost") for c in cells)}</tr>')
         rows += [f'<tr><td></td><td class="what">{html.escape(label)}</td>'
-                 f'{"".join(_html_figure(table, f, each, budget_steps) for f in figs)}</tr>'
-                 for label, figs, each in _published_rows(table, task, budget_steps)]
-    found, notes = _sources(table, budget_steps)
+                 f'{"".join(_html_figure(table, s, each) for s in shown)}</tr>'
+                 for label, shown, each in _published_rows(table, task, beside)]
+    found, notes = _sources(table, beside)
     sources = "".join([f'<li>{ROWS[s.row]}: <a href="{html.escape(s.url)}">{html.escape(s.title)}</a>; '
                        f"{html.escape(_source_text(s))}</li>" for s in found]
                       + [f"<li>{html.escape(note)}</li>" for note in notes])
@@ -413,7 +417,7 @@ def table_html(table: Table, budget_steps: int, path, budget_note: str = "") -> 
 MARKERS = {"paper": ("D", "tab:orange"), "omnisafe": ("X", "tab:purple")}
 
 
-def table_png(table: Table, budget_steps: int, path, budget_note: str = "") -> str:
+def table_png(table: Table, beside: Beside, path, budget_note: str = "") -> str:
     """The table as a figure: a row of panels per task (final return, final cost), a bar per
     algorithm with its interval, feasible ones dark, the best blue, infeasible ones grey; the
     published figures as markers, the limit dashed."""
@@ -429,9 +433,9 @@ def table_png(table: Table, budget_steps: int, path, budget_note: str = "") -> s
             for yi, algo, cell in zip(y, table.algos, cells):
                 _bar(ax, yi, cell, which)
                 for key, (marker, colour) in MARKERS.items():
-                    f = table.published.find(key, task, algo)
-                    if f is not None:
-                        ax.plot(_value(f, which, budget_steps), yi, marker, color=colour, ms=6, mew=1)
+                    shown = beside.figures.get((key, task, algo))
+                    if shown is not None:
+                        ax.plot(_value(shown, which), yi, marker, color=colour, ms=6, mew=1)
             ax.axvline(0, color="black", lw=0.5)
             ax.set_yticks(y, [_tick(table, a, c) for a, c in zip(table.algos, cells)], fontsize=9)
             for tick, cell in zip(ax.get_yticklabels(), cells):
@@ -449,7 +453,7 @@ def table_png(table: Table, budget_steps: int, path, budget_note: str = "") -> s
     labels.append("cost limit")
     fig.legend(handles, labels, loc="upper center", ncol=len(labels), fontsize=9, bbox_to_anchor=(0.5, 1.0),
                frameon=False)
-    caption = budget_caption(table, budget_steps, budget_note)
+    caption = budget_caption(beside, budget_note)
     height = fig.get_figheight()  # the legend and the caption take the top 0.8 inches
     fig.text(0.5, 1 - 0.32 / height, "\n".join(textwrap.wrap(
         f"Mean over seeds with its {CONFIDENCE:.0%} interval. {caption}", 150)), ha="center", va="top", fontsize=9)
@@ -478,17 +482,21 @@ def _tick(table: Table, algo: str, cell: Cell | None) -> str:
     return f"{name} {BEST_MARK}" if cell.best else name
 
 
-def write_table_report(trials: pd.DataFrame, out_dir, budget_steps: int,
-                       budget_note: str = "") -> dict[str, str] | None:
-    """Write table.md, table.html and table.png of ``trials`` into ``out_dir``; {file name: path},
+def write_table_report(trials: pd.DataFrame, out_dir, budget_steps: int, budget_note: str = "",
+                       note_limit: int | None = None) -> tuple[dict[str, str], str] | None:
+    """Write table.md, table.html and table.png of ``trials`` into ``out_dir``; ({file name: path},
+    the table as the parent run's note shows it, within ``note_limit`` characters: :func:`table_markdown`),
     or None when the sweep has no table (the module docstring). ``budget_steps``: the sweep's env
-    steps per trial; ``budget_note``: what else the budget means (a quick budget's small networks)."""
+    steps per trial; ``budget_note``: what else the budget means (a quick budget's small networks).
+    The table is built and its published figures resolved once for all of them."""
     table = build_table(trials)
     if table is None:
         return None
+    beside = table.figures_beside(budget_steps)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "table.md").write_text(markdown(table, budget_steps, budget_note), encoding="utf-8")
-    return {"table.md": str(out / "table.md"),
-            "table.html": table_html(table, budget_steps, out / "table.html", budget_note),
-            "table.png": table_png(table, budget_steps, out / "table.png", budget_note)}
+    (out / "table.md").write_text(markdown(table, beside, budget_note), encoding="utf-8")
+    return ({"table.md": str(out / "table.md"),
+             "table.html": table_html(table, beside, out / "table.html", budget_note),
+             "table.png": table_png(table, beside, out / "table.png", budget_note)},
+            note_markdown(table, beside, budget_note, note_limit))

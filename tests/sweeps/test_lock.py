@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from sweeps import run as cli
-from sweeps.lock import LOCK_FILE, STALE_S, DriverLock, SweepLocked
+from sweeps.lock import LOCK_FILE, STALE_S, DriverLock, SweepLocked, sweep_lock
 from sweeps.record import write_record
 
 REPO = Path(__file__).resolve().parents[2]
@@ -55,3 +55,15 @@ def test_two_resume_drivers_at_once(tmp_path):
     assert proc.returncode == 2
     assert f"another driver: host {socket.gethostname()} pid {os.getpid()}" in proc.stderr
     assert "Started a local Ray instance" not in proc.stdout + proc.stderr
+
+
+def test_sweep_lock_holds_the_block_and_skips_an_object_store_with_a_note(tmp_path, capsys):
+    with sweep_lock(tmp_path, str(tmp_path)):
+        assert (tmp_path / LOCK_FILE).exists()
+        with pytest.raises(SweepLocked, match=f"pid {os.getpid()}"), sweep_lock(tmp_path, str(tmp_path)):
+            pass
+    assert not (tmp_path / LOCK_FILE).exists()
+    with sweep_lock(tmp_path / "s3:" / "bucket", "s3://bucket"):
+        pass
+    assert "note: no driver lock on s3://bucket" in capsys.readouterr().err
+    assert not (tmp_path / "s3:").exists()

@@ -42,6 +42,11 @@ def hand_trials() -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _markdown(t, budget_steps: int, *args) -> str:
+    """The table's markdown beside runs of ``budget_steps`` env steps."""
+    return table.markdown(t, t.figures_beside(budget_steps), *args)
+
+
 def _rows(md: str) -> dict[tuple[str, str], list[str]]:
     """The markdown table as {(task, row label): cells per column}: a task's rows follow its first."""
     out, task = {}, None
@@ -65,7 +70,7 @@ def test_the_table_bolds_the_feasible_cells_and_marks_the_best_feasible_per_task
     assert cell.ret[2] < 14.0 < cell.ret[3]  # the bootstrap interval of the mean brackets it
     assert (t.cells[(ANT, "ppo_lag")].n_seeds, t.cells[(ANT, "ppo_lag")].n_failed) == (3, 1)
 
-    md = table.markdown(t, 40_000)
+    md = _markdown(t, 40_000)
     rows = _rows(md)
     assert [c.split(" [")[0] for c in rows[(PG, "return")]] == ["30.00 ± 1.00", "**14.00 ± 1.00** " + BEST_MARK,
                                                                  "**14.00 ± 1.00** " + BEST_MARK]
@@ -79,7 +84,7 @@ def test_the_table_bolds_the_feasible_cells_and_marks_the_best_feasible_per_task
 
 
 def test_the_published_figures_sit_in_their_cells_and_missing_ones_are_blank():
-    rows = _rows(table.markdown(table.build_table(hand_trials()), 40_000))
+    rows = _rows(_markdown(table.build_table(hand_trials()), 40_000))
     # Columns P3O, PPO-L, LAC. The paper's Table 2 has all three; OmniSafe has no LAC.
     assert rows[(PG, "paper (2.5M)")] == ["0.94 ± 1.04 / 30.53 ± 29.50", "11.36 ± 4.23 / 16.48 ± 10.95",
                                           "14.20 ± 3.35 / 22.21 ± 3.03"]
@@ -89,26 +94,26 @@ def test_the_published_figures_sit_in_their_cells_and_missing_ones_are_blank():
     assert not any(task == ANT and label.startswith("OmniSafe") for task, label in rows)
     # SAC-Lag's OmniSafe figure is off-policy, at 3M: a row of mixed budgets names each cell's.
     trials = pd.concat([hand_trials(), pd.DataFrame([_trial(PG, "sac_lag", s, 20.0, 20.0) for s in range(3)])])
-    omnisafe = _rows(table.markdown(table.build_table(trials), 40_000))[(PG, "OmniSafe")]
+    omnisafe = _rows(_markdown(table.build_table(trials), 40_000))[(PG, "OmniSafe")]
     assert omnisafe == ["1.60 ± 3.01 / 31.10 ± 80.03 (10M)", "12.96 ± 6.95 / 25.80 ± 34.99 (10M)",
                         "21.45 ± 6.97 / 19.17 ± 9.72 (3M)", ""]
 
 
 def test_the_table_states_its_budget_and_is_the_papers_only_at_the_papers():
     t = table.build_table(hand_trials())
-    quick = table.markdown(t, 40_000, "quick: 64-wide networks")
+    quick = _markdown(t, 40_000, "quick: 64-wide networks")
     assert quick.startswith("**Final return and cost per task and algorithm.** Budget: 40,000 env steps per trial "
                             "(quick: 64-wide networks), not the published figures' (paper's at 2.5M; OmniSafe's at "
                             "10M env steps)")
     assert "the paper's." not in quick
-    paper = table.markdown(t, 2_500_000)
+    paper = _markdown(t, 2_500_000)
     # OmniSafe's PointGoal1 figures at 2.5M are read from its curves (its table is at 10M).
     assert "Budget: 2,500,000 env steps per trial, the paper's. The published figures beside the cells: paper's at " \
            "2.5M; OmniSafe's at 2.5M env steps; OmniSafe's at this budget are read from its published curves (± the " \
            "reading's tolerance, not a std)." in paper
     # No figure published for the tasks: the budget alone.
     other = hand_trials().assign(task=lambda d: d["task"].map({PG: "lac/PointHazard-v0", ANT: "lac/CostProbe-v0"}))
-    assert "Budget: 2,500,000 env steps per trial.\n" in table.markdown(table.build_table(other), 2_500_000)
+    assert "Budget: 2,500,000 env steps per trial.\n" in _markdown(table.build_table(other), 2_500_000)
 
 
 CURVE = "https://github.com/Gaiejj/omnisafe_benchmarks_cruve/blob/9e1f6126be173c35fe8ad8683c9b8a95d6c51373/on-policy/benchmarks/first_order_pointgoal1_1e7.png"  # noqa: E501
@@ -118,7 +123,7 @@ def test_a_run_at_500k_is_set_beside_the_figure_read_at_500k_not_the_final_one()
     """OmniSafe's P3O and PPO-L on PointGoal1 at 500k, read off its first-order curve image: in the
     cells, labelled as read from a curve with the reading's tolerance, the image named under the table."""
     t = table.build_table(hand_trials())
-    md = table.markdown(t, 500_000)
+    md = _markdown(t, 500_000)
     rows = _rows(md)
     assert rows[(PG, "OmniSafe (500k)")] == ["-0.1 ±0.5 / 37 ±2 (read from a curve)",
                                              "16.2 ±1 / 59 ±2 (read from a curve)", ""]
@@ -131,35 +136,35 @@ def test_a_run_at_500k_is_set_beside_the_figure_read_at_500k_not_the_final_one()
     assert f"- OmniSafe at 500k: read from a curve, the height of its mean curve in [first_order_pointgoal1_1e7.png]" \
            f"({CURVE})" in md
     # Within 5% of a reading's steps is at it (a reading is no sharper); 1M is its own reading.
-    assert _rows(table.markdown(t, 490_000))[(PG, "OmniSafe (500k)")][1] == "16.2 ±1 / 59 ±2 (read from a curve)"
-    assert _rows(table.markdown(t, 1_000_000))[(PG, "OmniSafe (1M)")][1] == "18.5 ±0.5 / 51 ±2 (read from a curve)"
+    assert _rows(_markdown(t, 490_000))[(PG, "OmniSafe (500k)")][1] == "16.2 ±1 / 59 ±2 (read from a curve)"
+    assert _rows(_markdown(t, 1_000_000))[(PG, "OmniSafe (1M)")][1] == "18.5 ±0.5 / 51 ±2 (read from a curve)"
 
 
 def test_a_run_at_a_budget_without_a_reading_gets_the_final_figure_labelled_with_its_budget(tmp_path):
     t = table.build_table(hand_trials())
-    rows = _rows(table.markdown(t, 750_000))
+    rows = _rows(_markdown(t, 750_000))
     assert rows[(PG, "OmniSafe (10M)")] == ["1.60 ± 3.01 / 31.10 ± 80.03", "12.96 ± 6.95 / 25.80 ± 34.99", ""]
     # SAC-Lag's final figure is at 3M: a row of mixed budgets names each cell's, readings included.
     trials = pd.concat([hand_trials(), pd.DataFrame([_trial(PG, "sac_lag", s, 20.0, 20.0) for s in range(3)])])
     mixed = table.build_table(trials)
-    assert _rows(table.markdown(mixed, 750_000))[(PG, "OmniSafe")] == [
+    assert _rows(_markdown(mixed, 750_000))[(PG, "OmniSafe")] == [
         "1.60 ± 3.01 / 31.10 ± 80.03 (10M)", "12.96 ± 6.95 / 25.80 ± 34.99 (10M)",
         "21.45 ± 6.97 / 19.17 ± 9.72 (3M)", ""]
-    assert _rows(table.markdown(mixed, 500_000))[(PG, "OmniSafe (500k)")][2] == \
+    assert _rows(_markdown(mixed, 500_000))[(PG, "OmniSafe (500k)")][2] == \
         "25.6 ±1 / 47 ±4 (read from a curve)"
     # The page says the same on hover: the image and the tolerance's meaning, or the final figure's steps.
-    table.table_html(t, 500_000, tmp_path / "t.html")
+    table.table_html(t, t.figures_beside(500_000), tmp_path / "t.html")
     page = (tmp_path / "t.html").read_text()
     assert "500,000 env steps, read from its curve " + CURVE + " (± the reading&#x27;s tolerance" in page
-    table.table_html(t, 750_000, tmp_path / "t.html")
+    table.table_html(t, t.figures_beside(750_000), tmp_path / "t.html")
     assert "SafetyPointGoal1-v0, 10,000,000 env steps, limit 25" in (tmp_path / "t.html").read_text()
 
 
 def test_the_report_writes_markdown_html_with_intervals_on_hover_and_a_png(tmp_path):
-    paths = table.write_table_report(hand_trials(), tmp_path / "summary", 40_000)
+    paths, note = table.write_table_report(hand_trials(), tmp_path / "summary", 40_000)
     assert set(paths) == {"table.md", "table.html", "table.png"}
     md = (tmp_path / "summary" / "table.md").read_text()
-    assert md == table.table_markdown(hand_trials(), 40_000) and "Budget: 40,000 env steps per trial" in md
+    assert md == table.table_markdown(hand_trials(), 40_000) == note and "Budget: 40,000 env steps per trial" in md
     page = (tmp_path / "summary" / "table.html").read_text()
     lac = table.build_table(hand_trials()).cells[(PG, "lac")]
     assert (f'title="return mean 14.00, 95% interval [{lac.ret[2]:.2f}, {lac.ret[3]:.2f}]; 3 seeds">'
