@@ -99,8 +99,10 @@ def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tupl
     sets = {**registry.budget_fields(algo, "quick", get_task(task).preset), "nu_fixed": 0.0}
     config = registry.build_config(algo, task, seed, sets, timesteps=timesteps)
     # One process: the env runner samples in the driver, where a user's env module is importable
-    # (its folder travels in the task's kwargs: lac_rllib/tasks/user.py).
-    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    # (its folder travels in the task's kwargs: lac_rllib/tasks/user.py). A caller's Ray is used as it is.
+    started = not ray.is_initialized()
+    if started:
+        ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     rows = []
     try:
         algo_obj = config.build_algo()
@@ -110,7 +112,8 @@ def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tupl
         finally:
             algo_obj.stop()
     finally:
-        ray.shutdown()
+        if started:
+            ray.shutdown()
     costs = [r[EPISODE_COST] for r in rows if math.isfinite(r[EPISODE_COST])]
     tail = costs[-max(1, math.ceil(TAIL * len(costs))):]
     return tail, any(c == 0 for c in tail)

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from lac_rllib.algorithms.registry import algos_text
+from lac_rllib.constrained.algorithm import CHECKPOINT_FORMAT
 from lac_rllib.evaluation import (
     CheckpointError,
     _Recorder,
@@ -52,7 +53,7 @@ def test_checkpoint_metadata_written_by_lac(checkpoint):
 
     meta = json.loads(open(os.path.join(checkpoint, "rllib_checkpoint.json")).read())
     assert meta["lac_rllib_version"] == version("lac-rllib")
-    assert meta["checkpoint_format"] == 3
+    assert meta["checkpoint_format"] == CHECKPOINT_FORMAT == 4
     assert meta["task_id"] == TASK
     assert meta["cost_limit"] == 2.0 and meta["episode_cost_discount"] == 1.0
     assert meta["algo_config"]["env_steps_per_iteration"] == 500
@@ -219,7 +220,7 @@ def test_patch_version_difference_is_accepted(ckpt_copy):
 def test_format_mismatch(ckpt_copy):
     _edit_metadata(ckpt_copy, checkpoint_format=1)
     with pytest.raises(CheckpointError, match=r"unsupported checkpoint format 1 .*\(written by lac-rllib "
-                                              r"[\d.]+\): this lac-rllib .* reads formats 3 and 2"):
+                                              r"[\d.]+\): this lac-rllib .* reads formats 4 and 2 and 3"):
         restore_policy(str(ckpt_copy))
 
 
