@@ -164,9 +164,9 @@ def check(args, algo: str) -> None:
         if getattr(args, name) < low:
             raise ValueError(f"--{name} {getattr(args, name)} is invalid; accepted: an integer >= {low}")
     registry.check_algo(algo, (str(Path.cwd()),))
-    if "nu_fixed" not in registry.algo_config(algo).FIELDS.names:
-        with_one = [a for a in registry.ALGOS if "nu_fixed" in registry.algo_config(a).FIELDS.names]
-        raise ValueError(f"--algo {algo} has no Lagrange multiplier to pin at 0; accepted: {' | '.join(with_one)}")
+    if not registry.has_multiplier(algo):
+        raise ValueError(f"--algo {algo} has no Lagrange multiplier to pin at 0; accepted: "
+                         f"{registry.with_multiplier_text()}")
 
 
 def tasks_of(args) -> tuple[list[str], str | None]:

@@ -335,12 +335,11 @@ class Frontier(BaseModel):
     @field_validator("algo")
     @classmethod
     def _with_multiplier(cls, v, info: ValidationInfo):
-        from lac_rllib.algorithms.registry import ALGOS, algo_config, check_algo
+        from lac_rllib.algorithms.registry import check_algo, has_multiplier, with_multiplier_text
 
         check_algo(v, _search_dirs(info))
-        if "nu_fixed" not in algo_config(v).FIELDS.names:
-            with_one = [a for a in ALGOS if "nu_fixed" in algo_config(a).FIELDS.names]
-            raise ValueError(f"{v} has no Lagrange multiplier to fix; accepted: {' | '.join(with_one)}")
+        if not has_multiplier(v):
+            raise ValueError(f"{v} has no Lagrange multiplier to fix; accepted: {with_multiplier_text()}")
         return v
 
 

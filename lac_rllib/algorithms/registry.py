@@ -221,6 +221,17 @@ def build_config(algo: str, task: str, seed: int, sets: dict, num_env_runners: i
                                    cpus=cpus)
 
 
+def has_multiplier(algo: str) -> bool:
+    """Whether ``algo`` has a Lagrange multiplier one can hold fixed (its field ``nu_fixed``):
+    what the fixed-multiplier frontier and ``lac-sweep calibrate`` need."""
+    return "nu_fixed" in algo_config(algo).FIELDS.names
+
+
+def with_multiplier_text() -> str:
+    """The package's algorithms that have one, as refusals list them."""
+    return " | ".join(a for a in ALGOS if has_multiplier(a))
+
+
 def actions(algo: str) -> tuple[str, ...]:
     """What ``lac-eval --actions`` accepts for ``algo``'s policies."""
     return tuple(algo_config(algo).ACTIONS)

@@ -10,7 +10,7 @@ from lac_rllib.constrained.lagrange import HeldStep, LagrangeMultiplier, fixed_m
 from lac_rllib.constrained.metrics import NU, iteration_row
 
 TASK = "lac/PointHazard-v0"
-LAGRANGIAN = [a for a in registry.ALGOS if "nu_fixed" in registry.algo_config(a).FIELDS.names]
+LAGRANGIAN = [a for a in registry.ALGOS if registry.has_multiplier(a)]
 
 
 def test_the_lagrangian_algorithms_have_the_field_and_the_others_refuse_it():
