@@ -252,3 +252,14 @@ def write_ladder_report(trials: pd.DataFrame, out_dir) -> tuple[str, dict[str, f
     (out / "ladder.md").write_text(text + "\n", encoding="utf-8")
     ladder_png(table, points, out / "ladder.png")
     return text, parent_metrics(table) if not table.empty else {}
+
+
+def by_limit(trials: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
+    """The trials a table is made of, per limit of a ladder: [(``table-bB``, that limit's trials,
+    the frontier's left out)], so the paper's layout (one configuration per task and algorithm)
+    holds at each; without a ladder [("", trials)]."""
+    frontier = trials["group"].astype(str).eq(FRONTIER_GROUP)
+    limits = pd.to_numeric(trials[COST_LIMIT], errors="coerce")
+    if not applies(trials) or limits[~frontier].nunique() < 2:
+        return [("", trials[~frontier] if frontier.any() else trials)]
+    return [(f"table-b{fmt_value(b)}", trials[~frontier & (limits == b)]) for b in sorted(limits[~frontier].unique())]

@@ -114,7 +114,7 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
     """The report on the parent run (``summary/``) and the note that leads it; the parent closed."""
     from mlflow.entities import Metric
 
-    from sweeps.reports.ladder import applies, write_ladder_report
+    from sweeps.reports.ladder import applies, by_limit, write_ladder_report
     from sweeps.reports.report import (
         algorithm_comparison,
         note_markdown,
@@ -137,9 +137,11 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
             write_sweep_reports(trials, curves, tmp, fields=tuple(varied(trials, fields)))
             if applies(trials):  # a ladder of cost limits, or the fixed-multiplier frontier
                 ladder, ladder_metrics = write_ladder_report(trials, tmp)
-            if budget_steps:  # a sweep over tasks x algorithms: the paper's layout (None otherwise)
-                written = write_table_report(trials, tmp, budget_steps, about_budget, note_limit=5000)
-                table_note = written[1] if written else ""
+            if budget_steps:  # a sweep over tasks x algorithms: the paper's layout (None otherwise),
+                for folder, rows in by_limit(trials):  # one table per limit of a ladder, the first leads
+                    written = write_table_report(rows, Path(tmp) / folder, budget_steps, about_budget,
+                                                 note_limit=5000)
+                    table_note = table_note or (written[1] if written else "")
             if pareto is not None:
                 (Path(tmp) / "pareto.json").write_text(json.dumps(pareto, indent=2, default=str))
         tracker.client.log_artifacts(parent, tmp, "summary")

@@ -65,3 +65,18 @@ def test_the_ranking_change_is_named_once_and_winners_by_regret():
         ladder.choose(table, 1, by="best")
     text = ladder.ladder_markdown(table)
     assert "| 5 | 1 | ppo_lag |" in text and "ranking changes at b = 5 → 15" in text and "2.00 (ν=4)" in text
+
+
+def test_the_papers_table_is_made_at_each_limit_of_a_ladder(tmp_path):
+    """Per limit, one configuration per task and algorithm: the table's layout holds at each; the
+    frontier's runs are in none."""
+    from sweeps.reports.table import build_table, write_table_report
+
+    parts = ladder.by_limit(trials())
+    assert [name for name, _ in parts] == ["table-b5", "table-b15", "table-b25"]
+    assert all(set(rows["algo"]) == {"ppo_lag", "sac_lag"} and rows["group"].ne("frontier").all() for _, rows in parts)
+    assert build_table(trials()) is None  # all limits in one table: two configurations per cell
+    paths, note = write_table_report(parts[0][1], tmp_path / parts[0][0], 40_000)
+    assert (tmp_path / "table-b5" / "table.md").read_text() == note and set(paths) >= {"table.md"}
+    one = trials()[lambda d: (d["cost_limit"] == 5) & d["group"].ne("frontier")]
+    assert [name for name, _ in ladder.by_limit(one)] == [""]
