@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST, NU, NU_MAX
+from sweeps.reports.safety import violation
 
 #: The columns multiplier_behaviour returns, in the report's order.
 BEHAVIOUR_COLUMNS = ["steps_to_feasible", "overshoot", "swing", "nu_at_zero", "nu_at_bound", "cost_rate"]
@@ -48,11 +49,10 @@ def multiplier_behaviour(curve: pd.DataFrame) -> dict[str, float]:
     known = np.isfinite(cost) & np.isfinite(limit)
     out = dict.fromkeys(BEHAVIOUR_COLUMNS, math.nan)
     gap = (cost - limit)[known]
+    out["steps_to_feasible"] = violation(curve)["steps_to_feasible"]  # safety's figure, one definition
     inside = np.flatnonzero(gap <= 0)
     if inside.size:
-        first = inside[0]
-        out["steps_to_feasible"] = float(steps[known][first])
-        after = gap[first:]
+        after = gap[inside[0]:]
         out["overshoot"] = float(max(0.0, -after.min()))
         out["swing"] = float(np.sqrt(np.mean(after**2)))
     nu = _col(curve, NU)
