@@ -45,7 +45,7 @@ def multiplier_behaviour(curve: pd.DataFrame) -> dict[str, float]:
     """The module docstring's figures of one trial's ``curve`` (iterations in order; those without
     a cost or a limit are left out of the cost figures)."""
     curve = curve.sort_values(ENV_STEPS) if ENV_STEPS in curve else curve
-    steps, cost, limit = _col(curve, ENV_STEPS), _col(curve, EPISODE_COST), _col(curve, COST_LIMIT)
+    cost, limit = _col(curve, EPISODE_COST), _col(curve, COST_LIMIT)
     known = np.isfinite(cost) & np.isfinite(limit)
     out = dict.fromkeys(BEHAVIOUR_COLUMNS, math.nan)
     gap = (cost - limit)[known]
