@@ -44,7 +44,8 @@ class Plan:
     name: str  #: the sweep's name: its Tune directory under ``storage`` and its MLflow parent run
     storage: str
     optuna_storage: str | None  #: a search's Optuna storage URL
-    #: ``--confirm-top``: (K, seeds, budget) of the confirmation that follows the sweep (sweeps/reports/confirm.py)
+    #: ``--confirm-top``: (K, seeds, budget, by) of the confirmation that follows the sweep
+    #: (sweeps/reports/confirm.py; by: ``--confirm-by``, confirm.CONFIRM_BY)
     confirm: tuple | None = None
     #: A confirmation sweep's winners (sweeps/reports/confirm.py ``winners``): its report says whether each held up.
     confirms: tuple | None = None
@@ -185,10 +186,24 @@ def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), origin: s
     return ids, user
 
 
-def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | None) -> tuple[int, int, str | int]:
-    """``--confirm-top K [--confirm-seeds N] [--confirm-budget B]`` checked before Ray starts: one
-    task, a budget at least the sweep's (a smaller one would confirm something else). Returns the
-    plan's ``confirm``: (K, seeds, budget), the defaults filled in."""
+def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | None, by: str = "return"
+                  ) -> tuple[int, int, str | int, str]:
+    """``--confirm-top K [--confirm-seeds N] [--confirm-budget B] [--confirm-by BY]`` checked before
+    Ray starts: one task, a budget at least the sweep's (a smaller one would confirm something
+    else), and a regret choice only where the sweep has a ladder and its frontier (the regret is
+    R*(b) − R(b) against it). Returns the plan's ``confirm``: (K, seeds, budget, by), the defaults
+    filled in."""
+    from sweeps.reports.confirm import BY_RETURN, CONFIRM_BY
+
+    if by not in CONFIRM_BY:
+        raise ValueError(f"--confirm-by {by}; accepted: {' | '.join(CONFIRM_BY)}")
+    ladder, frontier = len(plan.sweep.cost_limits or ()) > 1, bool(plan.sweep.frontier)
+    if by != BY_RETURN and not (ladder and frontier):
+        missing = " and ".join(k for k, ok in (("cost_limits (two limits or more)", ladder), ("frontier", frontier))
+                               if not ok)
+        raise ValueError(f"--confirm-by {by}: the regret over a ladder needs the sweep's {missing} "
+                         f"(R*(b) comes from the fixed-multiplier frontier); accepted: --confirm-by {BY_RETURN}, "
+                         "or a sweep file with cost_limits and frontier")
     if len(plan.tasks) != 1:
         raise ValueError(f"--confirm-top with {len(plan.tasks)} tasks: a confirmation reruns one task's winners; "
                          "accepted: a sweep of one task")
@@ -197,26 +212,33 @@ def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | N
     if steps < plan.timesteps:
         raise ValueError(f"--confirm-budget {budget}: {steps:,} env steps is less than the sweep's {plan.timesteps:,}; "
                          "accepted: the same or a larger budget")
-    return top, seeds or max(len(plan.seeds), 3), budget
+    return top, seeds or max(len(plan.seeds), 3), budget, by
 
 
 def confirmation_plan(plan: Plan, sweep_dir: Path) -> Plan | None:
     """``--confirm-top``: the plan of the confirmation that follows the finished sweep ``plan``: its
     K best feasible configurations (read back from MLflow, ranked by the lower end of their return
-    interval) beside the default and the baselines the sweep ran, on fresh seeds, as the sweep
-    NAME-confirm (sweeps/reports/confirm.py). None: no feasible configuration but the default."""
+    interval, or by their worst or mean regret over a ladder) beside the default and the baselines
+    the sweep ran, on fresh seeds, as the sweep NAME-confirm (sweeps/reports/confirm.py). None: no
+    feasible configuration but the default."""
     from sweeps.reports import confirm
     from sweeps.reports.report import summarize
     from sweeps.reports.results import sweep_results
     from sweeps.tracking import SweepTracker
 
-    k, seeds, budget = plan.confirm
-    fields = confirm.varied_fields(plan.sweep)
+    k, seeds, budget, by = (*plan.confirm, confirm.BY_RETURN)[:4]
+    # Over several algorithms (``algo: [...]``) a configuration is also its algorithm.
+    fields = [*confirm.varied_fields(plan.sweep), *(["algo"] if len(plan.sweep.algo) > 1 else [])]
     tracker = SweepTracker(plan.tracking_uri, plan.experiment)
     trials, _ = sweep_results(tracker, parent_run_id(sweep_dir), tuple(fields))
     fields_of = {r["config"]: {f: r[f] for f in fields if f in r and not _missing(r[f])}
                  for r in trials.to_dict("records")}
-    top = confirm.winners(summarize(trials), fields_of, k) if len(trials) else []
+    if not len(trials):
+        top = []
+    elif by == confirm.BY_RETURN:
+        top = confirm.with_limits(confirm.winners(summarize(trials), fields_of, k), trials)
+    else:
+        top = confirm.regret_winners(trials, fields_of, k, by)
     if not top:
         return None
     name = f"{plan.name}-confirm"

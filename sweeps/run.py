@@ -111,6 +111,11 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "return interval) beside the default on fresh seeds (sweeps/reports/confirm.py)")
     p.add_argument("--confirm-seeds", type=_int_at_least(1), default=None, metavar="N",
                    help="seeds of the confirmation (default: the sweep's count, at least 3)")
+    from sweeps.reports.confirm import CONFIRM_BY
+
+    p.add_argument("--confirm-by", default="return", metavar="|".join(CONFIRM_BY),
+                   help="how the confirmation picks its winners: the lower end of the return interval (default), "
+                        "or over a ladder with its frontier the least worst or mean regret R*(b) - R(b)")
     p.add_argument("--confirm-budget", type=_budget, default=None, metavar="BUDGET",
                    help="the confirmation's budget: the sweep's (default) or a larger one")
     p.add_argument("--cost-limits", type=_limits, default=None, metavar="B1,B2,...",
@@ -140,9 +145,12 @@ def make_plan(args) -> Plan:
         check_shared(infra.tracking_uri, args.storage, infra.address_from)
     check_reachable(infra.tracking_uri)
     plan = plan_sweep(sweep, space, infra, module_search_dirs(args), origin, max_trials=args.max_trials)
+    if args.confirm_by != "return" and not args.confirm_top:
+        raise ValueError(f"--confirm-by {args.confirm_by} without --confirm-top; accepted: --confirm-top K "
+                         f"--confirm-by {args.confirm_by}")
     if args.confirm_top:
         plan = dataclasses.replace(plan, confirm=check_confirm(plan, args.confirm_top, args.confirm_seeds,
-                                                               args.confirm_budget))
+                                                               args.confirm_budget, args.confirm_by))
     return plan
 
 
@@ -243,7 +251,10 @@ def run_confirmation(plan: Plan, sweep_dir: Path) -> int:
     if confirmation is None:
         print("confirmation: no feasible configuration other than the default to confirm", flush=True)
         return 0
-    print(f"confirmation of {plan.name}: its {len(confirmation.confirms)} best feasible configuration(s) on seeds "
+    by = (*plan.confirm, "return")[3]
+    how = "best feasible" if by == "return" else f"least {by.replace('-', ' ')}"
+    names = ", ".join(w.get("name", w["config"]) for w in confirmation.confirms)
+    print(f"confirmation of {plan.name}: its {len(confirmation.confirms)} {how} configuration(s) ({names}) on seeds "
           f"{confirmation.seeds[0]}..{confirmation.seeds[-1]}", flush=True)
     SweepTracker(plan.tracking_uri, plan.experiment).client.set_tag(parent_run_id(sweep_dir), CONFIRMED_BY_TAG,
                                                                    confirmation.name)

@@ -8,6 +8,12 @@ the default configuration on fresh seeds (after the sweep's largest) at the same
 budget, as a second sweep with its own parent run, and says of each whether it held up: its
 confirmed mean return is at least the lower end of its search interval, and it stays within the
 limit.
+
+Over a ladder of cost limits (``cost_limits``), a configuration is one across the ladder: the winners
+are distinct configurations, each rerun at every limit and judged at each. With the frontier beside
+the ladder, ``--confirm-by worst-regret | mean-regret`` picks them by their worst or mean regret
+R*(b) − R(b) over the ladder instead (sweeps/reports/ladder.py, Spoor et al. 2026): the
+configuration closest to the fixed-multiplier optimum at its worst limit, or on average.
 """
 
 from __future__ import annotations
@@ -18,6 +24,9 @@ import pandas as pd
 
 #: A confirmation group's name: top1 … topK, beside "default" and "baseline-ALGO".
 TOP, DEFAULT_GROUP, BASELINE = "top", "default", "baseline-"
+#: How ``--confirm-by`` picks the winners: the lower end of the return interval, or the worst or
+#: mean regret over a ladder (ladder.REGRET_CHOICES).
+BY_RETURN, CONFIRM_BY = "return", ("return", "worst-regret", "mean-regret")
 
 
 def varied_fields(sweep) -> list[str]:
@@ -32,20 +41,82 @@ def varied_fields(sweep) -> list[str]:
 def rank(summary: pd.DataFrame, k: int) -> pd.DataFrame:
     """The ``k`` best mean-feasible configurations that are not the default, by the lower end of
     their return interval (then the mean: one seed has no interval)."""
-    ok = summary[summary["mean_feasible"].astype(bool) & summary["return_mean"].notna() & ~summary["is_default"]]
+    from sweeps.reports.ladder import FRONTIER_GROUP
+
+    ok = summary[summary["mean_feasible"].astype(bool) & summary["return_mean"].notna() & ~summary["is_default"]
+                 & ~summary["group"].astype(str).eq(FRONTIER_GROUP)]  # a fixed-ν run is the yardstick, not a candidate
     key = ok["return_mean_ci_low"].fillna(-math.inf)
     return ok.assign(_low=key).sort_values(["_low", "return_mean"], ascending=False).head(k).drop(columns="_low")
 
 
 def winners(summary: pd.DataFrame, fields_of: dict[str, dict], k: int) -> list[dict]:
     """The top ``k`` configurations (:func:`rank`) as {label, fields, search: its statistics}.
-    ``fields_of`` maps a configuration's ``config`` label to its varied fields' values."""
-    out = []
-    for i, r in enumerate(rank(summary, k).to_dict("records"), 1):
-        out.append({"group": f"{TOP}{i}", "config": r["config"], "fields": fields_of[r["config"]],
-                    "search": {c: _plain(r.get(c)) for c in ("return_mean", "return_mean_ci_low", "return_mean_ci_high",
-                                                             "cost_mean", "n_seeds")}})
+    ``fields_of`` maps a configuration's ``config`` label to its varied fields' values; a
+    configuration that ranks at several limits of a ladder is one winner (its best row)."""
+    out, seen = [], set()
+    for r in rank(summary, len(summary)).to_dict("records"):
+        key = _key(fields_of[r["config"]]) if fields_of.get(r["config"]) else r["config"]
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append({"group": f"{TOP}{len(out) + 1}", "config": r["config"], "fields": fields_of.get(r["config"], {}),
+                    "search": _stats(r)})
+        if len(out) == k:
+            break
     return out
+
+
+def regret_winners(trials: pd.DataFrame, fields_of: dict[str, dict], k: int, by: str) -> list[dict]:
+    """``--confirm-by worst-regret | mean-regret``: the ``k`` configurations of least worst (or
+    mean) regret over the ladder (ladder.choose), each with its regret and its figures per limit."""
+    from sweeps.reports import ladder
+
+    table = ladder.ladder_table(trials)
+    if table.empty:
+        return []
+    summary = ladder.wins(table).set_index("configuration")
+    configs = ladder.configs_by_label(trials)
+    out = []
+    for name in ladder.choose(table, k, by.removesuffix("-regret")):
+        config = configs[name][0]
+        out.append({"group": f"{TOP}{len(out) + 1}", "config": config, "fields": fields_of.get(config, {}),
+                    "search": {"worst_regret": _plain(summary.loc[name, "worst_regret"]),
+                               "mean_regret": _plain(summary.loc[name, "mean_regret"])}, "by": by})
+    return with_limits(out, trials, table)
+
+
+def with_limits(top: list[dict], trials: pd.DataFrame, table: pd.DataFrame | None = None) -> list[dict]:
+    """Over a ladder, each winner's name across it and its search figures at every limit
+    (``by_limit``: limit → its return interval, cost and regret there), so the confirmation judges
+    it at each; without a ladder ``top`` as it is."""
+    from sweeps.reports import ladder
+
+    if not ladder.applies(trials):
+        return top
+    table = ladder.ladder_table(trials) if table is None else table
+    if table.empty or table["cost_limit"].nunique() < 2:
+        return top
+    name_of = {c: name for name, configs in ladder.configs_by_label(trials).items() for c in configs}
+    names = table.apply(ladder.label, axis=1)
+    for w in top:
+        w["name"] = name_of.get(w["config"], w["config"])
+        rows = table[names == w["name"]]
+        w["by_limit"] = {float(r["cost_limit"]): {
+            "return_mean": _plain(r["return_mean"]), "return_mean_ci_low": _plain(r["return_low"]),
+            "return_mean_ci_high": _plain(r["return_high"]), "cost_mean": _plain(r["cost_mean"]),
+            "regret": _plain(r["regret"])} for r in rows.to_dict("records")}
+    return top
+
+
+def _key(fields: dict) -> str:
+    import json
+
+    return json.dumps(fields, sort_keys=True, default=str)
+
+
+def _stats(r: dict) -> dict:
+    return {c: _plain(r.get(c)) for c in ("return_mean", "return_mean_ci_low", "return_mean_ci_high", "cost_mean",
+                                          "n_seeds")}
 
 
 def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str, baselines: tuple[str, ...] = ()):
@@ -54,10 +125,13 @@ def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str, bas
     ``baseline-ALGO``), on ``seeds`` seeds after the sweep's largest, at ``budget``."""
     from sweeps.sweep_file import SweepFile
 
-    groups = {w["group"]: {"set": w["fields"]} for w in top} | {DEFAULT_GROUP: {}}
+    # A sweep of several algorithms (``algo: [...]``): each winner names its own, and there is no one default.
+    several = len(sweep.algo) > 1
+    groups = {w["group"]: {"set": w["fields"]} for w in top} | ({} if several else {DEFAULT_GROUP: {}})
     groups |= {f"{BASELINE}{algo}": {"set": {"algo": algo}} for algo in baselines}
     data = sweep.model_dump(exclude_none=True, exclude={"search", "grid", "groups", "groups_at", "searcher",
-                                                          "num_samples", "name", "seeds", "budget"})
+                                                          "num_samples", "name", "seeds", "budget",
+                                                          *(("algo",) if several else ())})
     return SweepFile.model_validate({**data, "groups": groups, "budget": budget, "name": name,
                                      "seeds": {"count": seeds, "start": max(sweep.seed_list()) + 1},
                                      "searcher": "grid", "description": f"confirmation of {sweep.name}"})
@@ -71,8 +145,11 @@ def held_up(search: dict, confirmed: dict) -> bool:
     return bool(confirmed.get("mean_feasible")) and confirmed.get("return_mean", -math.inf) >= low
 
 
-def confirmation_markdown(top: list[dict], summary: pd.DataFrame) -> str:
-    """The confirmation's verdict, one row per winner: its search interval against its confirmed one."""
+def confirmation_markdown(top: list[dict], summary: pd.DataFrame, trials: pd.DataFrame | None = None) -> str:
+    """The confirmation's verdict, one row per winner (per winner and limit over a ladder): its
+    search interval against its confirmed one; by regret, its worst and mean regret on both."""
+    if any(w.get("by_limit") for w in top):
+        return _ladder_markdown(top, summary, trials)
     from sweeps.reports.configurations import ci as _ci
     from sweeps.reports.configurations import fmt_num as _fmt_num
 
@@ -95,6 +172,60 @@ def confirmation_markdown(top: list[dict], summary: pd.DataFrame) -> str:
         lines += ["", f"The default on the same seeds: return {_fmt_num(default['return_mean'])}, cost "
                       f"{_fmt_num(default['cost_mean'])}."]
     return "\n".join(lines) + "\n"
+
+
+def _ladder_markdown(top: list[dict], summary: pd.DataFrame, trials: pd.DataFrame | None) -> str:
+    """Over a ladder: each winner at each limit (held up there or not), and by regret its worst and
+    mean regret on the search's seeds beside the fresh seeds' (against the confirmation's own frontier)."""
+    from sweeps.reports import ladder
+    from sweeps.reports.configurations import ci as _ci
+    from sweeps.reports.configurations import fmt_num as _fmt_num
+    from sweeps.reports.configurations import fmt_value
+
+    by = top[0].get("by", BY_RETURN)
+    at = {(r["group"], float(r["cost_limit"])): r for r in summary.to_dict("records") if not _na(r.get("cost_limit"))}
+    how = "the lower end of the return interval" if by == BY_RETURN else f"their {by.replace('-', ' ')} over the ladder"
+    lines = [f"**Confirmation on fresh seeds** across the ladder (the search's best by {how}):", "",
+             "| winner | configuration | b | search return [95% CI] | confirmed return [95% CI] | confirmed cost | "
+             "feasible seeds | held up |", "|---|---|---:|---:|---:|---:|---:|---|"]
+    tally = {}
+    for w in top:
+        for b, s in sorted(w.get("by_limit", {}).items()):
+            c = at.get((w["group"], b), {})
+            ok = held_up(s, c) if c.get("n_seeds") else None
+            tally.setdefault(w["group"], []).append(ok)
+            lines.append("| " + " | ".join([
+                w["group"], w.get("name", w["config"]).replace("|", "\\|"), fmt_value(b),
+                _ci(s["return_mean"], s["return_mean_ci_low"], s["return_mean_ci_high"]),
+                _ci(c.get("return_mean"), c.get("return_mean_ci_low"), c.get("return_mean_ci_high")) if c else "–",
+                _fmt_num(c.get("cost_mean")) if c else "–",
+                f"{round(c['feasible_fraction'] * c['n_seeds'])}/{c['n_seeds']}" if c.get("n_seeds") else "–",
+                {True: "yes", False: "no", None: "–"}[ok]]) + " |")
+    lines.append("")
+    fresh = ladder.wins(ladder.ladder_table(trials)) if trials is not None and len(trials) else pd.DataFrame()
+    fresh = {r.configuration: r for r in fresh.itertuples()} if len(fresh) else {}
+    for w in top:
+        oks = tally.get(w["group"], [])
+        line = f"- {w['group']} held up at {sum(o is True for o in oks)} of {len(oks)} limits"
+        if by != BY_RETURN:
+            f = fresh.get(_confirmed_name(w))
+            line += (f"; worst regret {_fmt_num(w['search']['worst_regret'])} on the search's seeds, "
+                     f"{_fmt_num(f.worst_regret) if f is not None else '–'} on the fresh ones; mean regret "
+                     f"{_fmt_num(w['search']['mean_regret'])}, {_fmt_num(f.mean_regret) if f is not None else '–'}")
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def _confirmed_name(winner: dict) -> str:
+    """A winner's name across the confirmation's ladder: its algorithm and group (ladder.label)."""
+    from sweeps.reports.ladder import label
+
+    algo = winner["fields"].get("algo") or winner.get("name", "").split(" ")[0]
+    return label({"algo": algo, "group": winner["group"], "param": "", "value": ""})
+
+
+def _na(v) -> bool:
+    return v is None or (isinstance(v, float) and math.isnan(v))
 
 
 def _plain(v):

@@ -142,6 +142,19 @@ def ranking_changes(table: pd.DataFrame) -> list[str]:
     return lines
 
 
+def configs_by_label(trials: pd.DataFrame) -> dict[str, list[str]]:
+    """Each configuration's name across the ladder (:func:`label`) → its trials' ``config`` labels
+    (one per limit), the frontier's runs aside: how a name :func:`choose` returns finds its fields."""
+    df = _scored(trials)
+    df = df[~df["group"].astype(str).eq(FRONTIER_GROUP)]
+    out: dict[str, list[str]] = {}
+    for name, config in zip(df.apply(label, axis=1), df["config"].astype(str)):
+        out.setdefault(name, [])
+        if config not in out[name]:
+            out[name].append(config)
+    return out
+
+
 def choose(table: pd.DataFrame, k: int, by: str = "worst") -> list[str]:
     """The ``k`` configurations of least ``by`` regret over the ladder (``by``: worst | mean), per task."""
     if by not in REGRET_CHOICES:

@@ -200,7 +200,7 @@ def note_extras(summary, trials, curves, fields, plan, pareto) -> str:
     if plan is not None and plan.confirms:
         from sweeps.reports.confirm import confirmation_markdown
 
-        parts.append(confirmation_markdown(list(plan.confirms), summary))
+        parts.append(confirmation_markdown(list(plan.confirms), summary, trials))
     if pareto:
         parts.append(report.pareto_markdown(pareto))
     parts.append(report.importance_markdown(trials, tuple(varied(trials, fields))))

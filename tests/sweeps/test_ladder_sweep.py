@@ -88,3 +88,39 @@ def test_a_bad_ladder_or_frontier_is_one_line_naming_the_key_before_ray(tmp_path
     from tests.sweeps.test_sweep_file import test_a_bad_file_is_one_line_naming_the_key_before_ray as check
 
     check(tmp_path, monkeypatch, capsys, text, needle)
+
+
+@pytest.mark.slow
+def test_a_ladder_sweep_confirms_its_least_mean_regret_configuration_at_every_limit(ray_session, tmp_path, capsys):
+    """--confirm-top 1 --confirm-by mean-regret: the winner is the configuration of least mean
+    regret in the search's ladder report; the confirmation reruns it at both limits beside the
+    frontier on a fresh seed, and its note judges it at each limit with the regret on both seeds."""
+    import pandas as pd
+
+    from sweeps.reports import ladder
+
+    text = LADDER.replace("[ppo_lag, sac_lag]", "[ppo_lag, p3o]").replace("nu: [0, 1, 4]", "nu: [0, 4]")
+    path = tmp_path / "ladder.yaml"
+    path.write_text(text)
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    rc = cli.main(["--config", str(path), "--seeds", "1", "--confirm-top", "1", "--confirm-by", "mean-regret",
+                   "--confirm-seeds", "1", "--experiment", "test", "--max-concurrent", "2", "--tracking-uri", uri,
+                   "--storage", str(tmp_path / "rr")])
+    assert rc == 0, capsys.readouterr().err[-2000:]
+    client = MlflowClient(uri)
+    runs = client.search_runs([client.get_experiment_by_name("test").experiment_id], max_results=100)
+    parents = {r.data.tags["lac.sweep_name"]: r for r in runs if r.data.tags.get("lac.sweep") == "1"}
+    search = next(p for n, p in parents.items() if not n.endswith("-confirm"))
+    confirmation = next(p for n, p in parents.items() if n.endswith("-confirm"))
+    table = pd.read_csv(client.download_artifacts(search.info.run_id, "summary/ladder.csv", str(tmp_path)))
+    table[["param", "value"]] = table[["param", "value"]].fillna("")  # the CSV's empty cells
+    best = ladder.wins(table).sort_values("mean_regret").iloc[0]["configuration"]  # e.g. "ppo_lag ladder"
+    confirmed = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == confirmation.info.run_id]
+    top1 = [c for c in confirmed if c.data.params["group"] == "top1"]
+    assert {c.data.params["algo"] for c in top1} == {best.split(" ")[0]}  # here a configuration is its algorithm
+    assert sorted(c.data.metrics["cost_limit"] for c in top1) == [0.0, 2.0]
+    assert {int(c.data.params["seed"]) for c in confirmed} == {1}  # the search ran seed 0
+    assert sum(c.data.params["group"] == "frontier" for c in confirmed) == 2
+    note = confirmation.data.tags["mlflow.note.content"]
+    assert "across the ladder (the search's best by their mean regret over the ladder)" in note, note[:3000]
+    assert "top1 held up at" in note and "of 2 limits; worst regret" in note, note[:3000]

@@ -84,3 +84,79 @@ def test_the_confirmation_reruns_the_winners_the_default_and_the_baselines_on_fr
     assert {g: dict(grp.set) for g, grp in c.groups.items()} == {
         "top1": {"langevin_steps": 9}, "default": {}, "baseline-ppo_lag": {"algo": "ppo_lag"}}
     assert confirm.varied_fields(sweep) == ["algo", "langevin_steps"]
+
+
+# Over a ladder of cost limits (sweeps/reports/ladder.py): the hand-made trials of test_ladder.py,
+# where ppo_lag's regrets are 0, 1, -1 (worst 1, mean 0) and sac_lag's 1, 0, 1 (worst 1, mean 2/3).
+def _ladder_trials():
+    from tests.sweeps.reports.test_ladder import trials
+
+    return trials()
+
+
+def _fields_of(trials):
+    return {c: {"algo": a} for c, a in zip(trials["config"], trials["algo"])}
+
+
+def test_winners_by_mean_regret_carry_their_figures_at_every_limit():
+    trials = _ladder_trials()
+    top = confirm.regret_winners(trials, _fields_of(trials), 1, "mean-regret")
+    assert [(w["name"], w["fields"]) for w in top] == [("ppo_lag", {"algo": "ppo_lag"})]  # 0 against 2/3
+    assert top[0]["search"] == {"worst_regret": 1.0, "mean_regret": 0.0}
+    assert sorted(top[0]["by_limit"]) == [5.0, 15.0, 25.0]
+    assert [top[0]["by_limit"][b]["regret"] for b in (5.0, 15.0, 25.0)] == [0.0, 1.0, -1.0]
+    assert top[0]["by_limit"][15.0]["return_mean"] == 5.0
+    both = confirm.regret_winners(trials, _fields_of(trials), 2, "worst-regret")  # a tie at 1: both, once each
+    assert sorted(w["name"] for w in both) == ["ppo_lag", "sac_lag"] and [w["group"] for w in both] == ["top1", "top2"]
+
+
+def test_by_return_a_configuration_that_leads_at_several_limits_is_one_winner_and_the_frontier_none():
+    rows = [("a-b1", 5.0, 4.0, "g"), ("a-b2", 6.0, 4.5, "g"), ("c-b1", 3.0, 2.0, "g"), ("nu-b1", 9.0, 8.0, "frontier")]
+    summary = pd.DataFrame([{"config": c, "return_mean": r, "return_mean_ci_low": lo, "return_mean_ci_high": r + 1,
+                             "cost_mean": 0.0, "cost_limit": 1.0, "mean_feasible": True, "is_default": False,
+                             "n_seeds": 3, "group": g} for c, r, lo, g in rows])
+    fields = {"a-b1": {"beta": 1.0}, "a-b2": {"beta": 1.0}, "c-b1": {"beta": 2.0}, "nu-b1": {}}
+    top = confirm.winners(summary, fields, 2)
+    assert [(w["config"], w["fields"]) for w in top] == [("a-b2", {"beta": 1.0}), ("c-b1", {"beta": 2.0})]
+
+
+def test_a_confirmation_of_several_algorithms_runs_each_winners_own_and_no_default():
+    sweep = sweep_file.load("x.yaml", "task: lac/PointHazard-v0\nalgo: [ppo_lag, sac_lag]\nbudget: smoke\n"
+                                      "seeds: 2\ncost_limits: [0, 2]\nfrontier: {algo: ppo_lag, nu: [0, 1]}\n")
+    top = [{"group": "top1", "config": "sac_lag-b0", "fields": {"algo": "sac_lag"}, "search": {}}]
+    c = confirm.confirmation_file(sweep, top, 3, "smoke", "x-confirm")
+    assert {g: dict(grp.set) for g, grp in c.groups.items()} == {"top1": {"algo": "sac_lag"}}
+    assert c.algo == ("lac",) and c.cost_limits == (0.0, 2.0) and c.frontier.nu == (0.0, 1.0)  # rerun beside it
+
+
+def test_the_verdict_across_a_ladder_is_per_limit_with_the_regret_on_fresh_seeds():
+    trials = _ladder_trials()
+    top = confirm.regret_winners(trials, _fields_of(trials), 1, "mean-regret")
+    # The confirmation's summary: top1 held up at b = 5 (2.0 ≥ its low end) and b = 25, not at 15 (cost 16 > 15).
+    confirmed = pd.DataFrame([{"group": "top1", "cost_limit": b, "return_mean": r, "return_mean_ci_low": r,
+                               "return_mean_ci_high": r, "cost_mean": c, "mean_feasible": c <= b, "n_seeds": 2,
+                               "feasible_fraction": float(c <= b)} for b, r, c in ((5.0, 2.0, 4.0), (15.0, 9.0, 16.0),
+                                                                                  (25.0, 9.0, 20.0))])
+    fresh = trials.assign(group=trials["group"].where(trials["group"].eq("frontier"), "top1"))
+    fresh = fresh[fresh["group"].eq("frontier") | fresh["algo"].eq("ppo_lag")]
+    text = confirm.confirmation_markdown(top, confirmed, fresh)
+    assert "| top1 | ppo_lag | 15 |" in text and "held up at 2 of 3 limits" in text, text
+    # The fresh seeds are the search's own here, so their regrets are the search's: worst 1, mean 0.
+    assert "worst regret 1.00 on the search's seeds, 1.00 on the fresh ones; mean regret 0.00, 0.00" in text, text
+
+
+@pytest.mark.parametrize("extra,needle", [
+    (["--confirm-top", "1", "--confirm-by", "worst-regret"],
+     "--confirm-by worst-regret: the regret over a ladder needs the sweep's frontier"),
+    (["--confirm-by", "mean-regret"], "--confirm-by mean-regret without --confirm-top"),
+    (["--confirm-top", "1", "--confirm-by", "best"],
+     "--confirm-by best; accepted: return | worst-regret | mean-regret"),
+])
+def test_a_regret_choice_without_a_ladder_and_frontier_is_one_line_before_ray(tmp_path, extra, needle):
+    path = tmp_path / "l.yaml"
+    path.write_text("task: lac/PointHazard-v0\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\ncost_limits: [0, 2]\n")
+    args = cli.parse_args(["--config", str(path), "--tracking-uri", f"sqlite:///{tmp_path / 'm.db'}",
+                           "--storage", str(tmp_path / "rr"), *extra])
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(args)
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
