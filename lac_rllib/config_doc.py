@@ -91,6 +91,14 @@ def _algo_section(algo: str, first: bool) -> list[str]:
     for n in touched:
         cells = [_code(p[n]) if n in p else "" for p in presets.values()]
         out.append(f"| `{n}` | {_code(defaults[n])} | " + " | ".join(cells) + " |")
+    if mod.SEARCH_SPACE:  # what search: default and a tuned comparison search (sweeps/tuned.py)
+        out += ["", f"### {fields.what} search space", "",
+                "`search: default` in a sweep file, and every tuned comparison (`tune:`), search these fields "
+                "(`SEARCH_SPACE` in its config.py); a range *around the default* is placed around the field's "
+                "value on the trial's task.", "", "| field | distribution | range | source |", "|---|---|---|---|"]
+        for n, d in mod.SEARCH_SPACE.items():
+            where = f"default / {d.around:g} to default × {d.around:g}" if d.around else " to ".join(map(str, d.args))
+            out.append(f"| `{n}` | {d.kind} | {where} | {_cell(d.source)} |")
     return out
 
 

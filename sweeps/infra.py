@@ -25,6 +25,7 @@ class Infra:
     max_failures: int
     optuna_seed: int
     optuna_storage: str | None = None  #: as given (None: beside the MLflow store)
+    registry: str | None = None  #: the tuned configurations (``--registry``; None: the repository's tuned/)
 
 
 def check_address(address: str | None, source: str | None = "--address") -> None:

@@ -60,6 +60,9 @@ class Plan:
     early_stopping: tuple | None = None
     #: (factor, what it came from): this machine's speed against the rates' (sweeps/estimate.py).
     calibration: tuple = (1.0, "the rates as measured")
+    #: The env fingerprints its trials run in (id → fingerprint, lac_rllib/tasks/fingerprint.py): a
+    #: resume in another environment is refused (sweeps/record.py).
+    env_fingerprints: dict = dataclasses.field(default_factory=dict)
 
     @property
     def task(self) -> str | None:
@@ -118,7 +121,10 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         trials, first = None, [dataclasses.replace(spaces.trial_spec(
             {"task": tasks[0], "budget": sweep.budget, "sets": sets, "overrides": {}}), seed=0)]
     else:
-        trials = first = spaces.resolve_trials(spaces.expand(sweep, tasks), sweep.budget, sets)
+        expanded = spaces.expand(sweep, tasks)
+        if sweep.preset == "tuned":
+            expanded = with_tuned(expanded, sweep, sets, infra.registry)
+        trials = first = spaces.resolve_trials(expanded, sweep.budget, sets)
     from lac_rllib.constrained.cpus import check_cpus
 
     for t in first:
@@ -144,6 +150,11 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         grace, why = grace_period(trials or first, timesteps, sweep.grace_period)
         early = (grace, why, tuple(milestones(grace, timesteps)))
     name = sweep.name
+    from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
+
+    # A search's samples may change a field the fingerprint reads: its base configuration stands for them.
+    fps = [fingerprint(t.task, t.params) for t in first]
+    env_fingerprints = {fingerprint_id(fp): fp for fp in fps}
     optuna_storage = None
     if sweep.is_search:
         optuna_storage = infra.optuna_storage or default_optuna_storage(infra.tracking_uri, infra.storage)
@@ -154,8 +165,29 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         estimated_wall_s=figures.wall_s, estimated_cpu_h=figures.cpu_h,
         trial_seconds=figures.trial_seconds, eval_share=figures.eval_share, calibration=figures.calibration,
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
-        user_algos=user_algos(sweep),
+        user_algos=user_algos(sweep), env_fingerprints=env_fingerprints,
     )
+
+
+def with_tuned(trials: list[TrialSpec], sweep: SweepFile, sets: dict, registry: str | None) -> list[TrialSpec]:
+    """``preset: tuned``: each trial (the frontier's aside) starts from its task's and algorithm's entry
+    in the registry of tuned configurations, below the sweep's ``set`` and its own swept values;
+    refused in one line where there is no entry, or it was tuned at another budget or in another
+    environment (sweeps/tuned_registry.py ``tuned_fields``)."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD
+    from sweeps.tuned_registry import DEFAULT_REGISTRY, tuned_fields
+
+    cache, out = {}, []
+    for t in trials:
+        if t.group == spaces.FRONTIER_GROUP:
+            out.append(t)
+            continue
+        algo = t.overrides.get(ALGO_FIELD, sets.get(ALGO_FIELD, DEFAULT_ALGO))
+        if (t.task, algo) not in cache:
+            cache[t.task, algo] = tuned_fields(Path(registry or DEFAULT_REGISTRY), t.task, algo, sweep.budget, sets)
+        tuned = {k: v for k, v in cache[t.task, algo].items() if k not in t.overrides and k not in sets}
+        out.append(dataclasses.replace(t, overrides={**tuned, **t.overrides}))
+    return out
 
 
 def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), origin: sweep_file.Origin | None = None

@@ -53,6 +53,12 @@ def resume_differences(sweep_dir: Path, plan) -> list[str]:
     diff += [f"{k}={old_plan[k]!r} (now {now[k]!r})" for k in IDENTITY_PLAN if k in old_plan and old_plan[k] != now[k]]
     diff += [f"--{k.replace('_', '-')}={old_infra[k]!r} (now {getattr(plan.infra, k)!r})"
              for k in IDENTITY_INFRA if k in old_infra and old_infra[k] != getattr(plan.infra, k)]
+    old_envs, new_envs = old_plan.get("env_fingerprints"), now.get("env_fingerprints", {})
+    if old_envs is not None and set(old_envs) != set(new_envs):  # a record from before fingerprints: no check
+        from lac_rllib.tasks.fingerprint import differences
+
+        pairs = zip(sorted(set(old_envs) - set(new_envs)), sorted(set(new_envs) - set(old_envs)))
+        diff.append("the environment: " + ", ".join(differences(old_envs[a], new_envs[b]) for a, b in pairs))
     return diff
 
 

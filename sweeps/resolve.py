@@ -82,6 +82,8 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     data.setdefault("experiment", "lac-sweeps")
     if base.is_search:
         data.setdefault("num_samples", 20)
+        if data["search"] == "default" or "default" in data["search"].values():
+            data["search"] = _declared_search(data, origin)
     elif "groups" not in data:  # the file's one group (or one configuration), named after the file
         group = sweep_file.safe_name(space)
         data["groups"] = {group: {"grid": data.pop("grid", {})}} if data.get("grid") else {group: {}}
@@ -99,6 +101,28 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
         # Derived from the file's stem and the task: made safe rather than refused (it becomes a path).
         sweep = sweep.model_copy(update={"name": args.name or sweep_file.safe_name(f"{space}-{what}-{sweep.budget}")})
     return sweep, space, origin
+
+
+def _declared_search(data: dict, origin) -> dict:
+    """The file's ``search: default`` (or a field's ``default``) as the algorithm's declared ranges
+    on the sweep's task and budget (spaces.declared_search)."""
+    from lac_rllib.tasks import get_task
+
+    search = data["search"]
+    if isinstance(search, dict) and ALGO_FIELD in search:
+        raise ValueError(f"{origin(('search', ALGO_FIELD))}: a search over algo with default ranges: each "
+                         "algorithm has its own space; accepted: one algorithm per search (or tune: for several)")
+    task = data["task"][0]
+    task = task if isinstance(task, str) else sweep_file.UserEnv.model_validate(task).task_id()
+    try:
+        get_task(task)  # a user's env is registered when the plan builds it: its ranges need its defaults
+    except ValueError:
+        raise ValueError(f"{origin(('search',))}: default ranges on a user's env: give each field's distribution "
+                         "(its defaults are known once the env is built)") from None
+    try:
+        return spaces.declared_search(data["algo"][0], task, data["budget"], data.get("set", {}), search)
+    except ValueError as e:
+        raise ValueError(f"{origin(('search',))}: {e}") from None
 
 
 def parse_set_pairs(pairs: list[str]) -> dict:

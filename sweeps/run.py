@@ -1,5 +1,7 @@
 """The sweep service: ``python sweeps/run.py --space ablation`` (Ray Tune + Optuna, tracked in MLflow);
-``lac-sweep calibrate --task ID`` proposes a ladder of cost limits for a task (sweeps/calibrate.py).
+``lac-sweep calibrate --task ID`` proposes a ladder of cost limits for a task (sweeps/calibrate.py);
+``lac-sweep registry`` lists the tuned configurations (sweeps/tuned_registry.py); a sweep file with
+``tune:`` runs a tuned comparison (sweeps/tuned.py).
 
 Every argument is checked, and the plan printed, before Ray starts. One MLflow parent run per
 sweep, one child run per trial; the Tune experiment lives in ``--storage``/``--name`` so that
@@ -121,6 +123,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--cost-limits", type=_limits, default=None, metavar="B1,B2,...",
                    help="a ladder of cost limits: every configuration runs at each (the sweep file's cost_limits; "
                         "lac-sweep calibrate --task ID proposes one)")
+    p.add_argument("--registry", default=None, metavar="DIR",
+                   help="the registry of tuned configurations a tuned comparison writes and preset: tuned reads "
+                        "(default: the repository's tuned/; lac-sweep registry lists it)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="set a field in every trial (the swept value wins); e.g. nu_max_adaptive=False; "
                         f"algo={algos_text('|')} picks the algorithm (fields: docs/config.md), or "
@@ -138,12 +143,20 @@ def make_plan(args) -> Plan:
     infra = Infra(address=address, address_from="--address" if args.address else "RAY_ADDRESS" if address else None,
                   tracking_uri=args.tracking_uri or default_tracking_uri(), storage=args.storage,
                   resume=args.resume, max_failures=args.max_failures, optuna_seed=args.optuna_seed,
-                  optuna_storage=args.optuna_storage)
+                  optuna_storage=args.optuna_storage, registry=args.registry)
     check_address(address, infra.address_from)
     check_storage(args.storage)
     if address not in (None, "local"):
         check_shared(infra.tracking_uri, args.storage, infra.address_from)
     check_reachable(infra.tracking_uri)
+    if sweep.tune is not None:  # every algorithm searched at the same budget, then confirmed together
+        if args.confirm_top:
+            raise ValueError("--confirm-top with tune: a tuned comparison confirms every algorithm's winners "
+                             "itself; accepted: tune.top and tune.confirm_seeds in the sweep file")
+        from sweeps.tuned import make_tuned_plan
+
+        return make_tuned_plan(sweep, space, infra, module_search_dirs(args), origin, args.max_trials,
+                               registry=args.registry)
     plan = plan_sweep(sweep, space, infra, module_search_dirs(args), origin, max_trials=args.max_trials)
     if args.confirm_by != "return" and not args.confirm_top:
         raise ValueError(f"--confirm-by {args.confirm_by} without --confirm-top; accepted: --confirm-top K "
@@ -212,16 +225,30 @@ def main(argv=None) -> int:
         from sweeps import calibrate
 
         return calibrate.main(argv[1:])
+    if argv[:1] == ["registry"]:  # lac-sweep registry [DIR]: the tuned configurations
+        from sweeps.tuned_registry import DEFAULT_REGISTRY, listing
+
+        print(listing(Path(argv[1]) if len(argv) > 1 else DEFAULT_REGISTRY))
+        return 0
     args = parse_args(argv)
     # RLlib warns once per process that LAC runs on the new API stack (it is built for it): noise
     # above the plan. Trials run in other processes, where RLlib's own logging is untouched.
     logging.getLogger("ray.rllib.algorithms.algorithm_config").setLevel(logging.ERROR)
     try:
         plan = make_plan(args)
-        sweep_dir = checked_sweep_dir(plan)
+        if not isinstance(plan, Plan):  # a tuned comparison: each of its sweeps is checked as it starts
+            from sweeps.tuned import run_tuned
+
+            for sub in plan.searches.values():
+                if sub.infra.resume or not (Path(sub.storage) / sub.name).exists():
+                    checked_sweep_dir(sub)
+        else:
+            sweep_dir = checked_sweep_dir(plan)
     except ValueError as e:
         print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
+    if not isinstance(plan, Plan):
+        return run_tuned(plan, run_locked)
     rc = run_locked(plan, sweep_dir)
     if rc == 0 and plan.confirm:
         rc = run_confirmation(plan, sweep_dir)

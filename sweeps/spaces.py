@@ -229,6 +229,33 @@ def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
     return trials
 
 
+def declared_search(algo: str, task: str, budget, sets: dict, search) -> dict:
+    """A search's ``default`` entries as distributions (a sweep file's data): ``search: default`` is
+    ``algo``'s whole declared space (lac_rllib/constrained/search_space.py), a field whose value is
+    ``default`` that field's declared range; ranges ``around`` a default are placed around the field's
+    value on ``task`` at ``budget`` with ``sets``. Other entries are kept as given."""
+    from lac_rllib.algorithms.registry import search_space
+
+    declared = search_space(algo)
+    if not declared:
+        raise ValueError(f"search: default: {algo} declares no search space; accepted: field → a distribution")
+    wanted = dict.fromkeys(declared, "default") if search == "default" else dict(search)
+    unknown = [f for f, d in wanted.items() if d == "default" and f not in declared]
+    if unknown:
+        raise ValueError(f"search.{unknown[0]}: default, and {unknown[0]} is not in {algo}'s search space; "
+                         f"accepted: {', '.join(declared)} (or a distribution of your own)")
+    base = trial_params(task, budget, {**sets, "algo": algo})
+    out = {}
+    for name, dist in wanted.items():
+        if dist != "default":
+            out[name] = dist.model_dump(exclude_none=True) if hasattr(dist, "model_dump") else dist
+            continue
+        d = declared[name]
+        args = list(d.bounds(base.get(name)))
+        out[name] = {d.kind: [int(a) for a in args] if d.kind == "int" else args}
+    return out
+
+
 def tune_search_space(search: dict) -> dict:
     """A search file's distributions as Tune's (OptunaSearch converts them to Optuna's)."""
     from ray import tune

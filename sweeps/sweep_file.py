@@ -370,6 +370,27 @@ class GroupsAt(BaseModel):
     _budget = field_validator("budget", mode="before")(classmethod(lambda cls, v: _budget_value(v)))
 
 
+class TuneSpec(BaseModel):
+    """The equal budget of a tuned comparison: each algorithm gets ``num_samples`` configurations of
+    its search space, each trained with ``seeds`` seeds, at the sweep's budget, under ``searcher`` (the
+    constrained TPE by default); then its ``top`` best are confirmed beside its default on
+    ``confirm_seeds`` fresh seeds, every algorithm in the same confirmation."""
+
+    model_config = _schema_config()
+    searcher: Literal["random", "tpe"] = "tpe"
+    """Optuna's sampler for every algorithm: ``tpe`` (with the feasibility constraint) or ``random``."""
+    num_samples: Int(1, MAX_SAMPLES) = 8
+    """Configurations each algorithm's search samples."""
+    seeds: Seeds = Seeds(count=3)
+    """Seeds per sampled configuration (``3``, ``{count: 3, start: 0}`` or a list)."""
+    confirm_seeds: Int(1, MAX_SEEDS) = 5
+    """Fresh seeds of the confirmation (after the search's largest), for every winner and default."""
+    top: Int(1, 10) = 1
+    """Configurations per algorithm confirmed (the registry keeps the first)."""
+
+    _seeds = field_validator("seeds", mode="before")(classmethod(lambda cls, v: _seeds_form(v)))
+
+
 class SweepFile(BaseModel):
     """A sweep: task(s) × algorithm(s) × configurations × seeds at one budget, searched or gridded.
 
@@ -403,8 +424,11 @@ class SweepFile(BaseModel):
     """Named groups of configurations, the sweep runs all of them (e.g. Table 3's NI, VT, PR)."""
     groups_at: tuple[GroupsAt, ...] = ()
     """Groups used instead of ``groups`` at a budget and task preset (the first match wins)."""
-    search: dict[str, Distribution] | None = Field(None, min_length=1)
-    """field → distribution, sampled ``num_samples`` times by ``searcher``."""
+    search: Literal["default"] | dict[str, Distribution | Literal["default"]] | None = None
+    """field → distribution, sampled ``num_samples`` times by ``searcher``; ``default``: the algorithm's
+    declared search space (its important fields with ranges and sources, docs/config.md "Search
+    spaces"), or, as one field's value, that field's declared range (a narrower search: name only
+    some of its fields, or give some a range of your own)."""
     searcher: Literal["grid", "random", "tpe", "motpe", "nsga2"] | None = None
     """``grid`` (``grid``/``groups``; the default without ``search``), ``random`` (Optuna's random
     sampler), ``tpe`` (Optuna's TPE on one objective with the feasibility constraint; the default with
@@ -443,6 +467,15 @@ class SweepFile(BaseModel):
     "Across a ladder of cost limits"); ``lac-sweep calibrate`` proposes one. Default: each task's limit."""
     frontier: Frontier | None = None
     """The fixed-multiplier frontier's runs beside the sweep's own (:class:`Frontier`)."""
+    tune: TuneSpec | None = None
+    """A tuned comparison (sweeps/tuned.py): every algorithm the sweep runs is searched over its own
+    search space with the same searcher, samples, seeds and env steps, its best configuration and its
+    default then rerun together on fresh seeds; the report compares default with tuned, and each winner
+    is written to the registry of tuned configurations (:class:`TuneSpec`)."""
+    preset: Literal["tuned"] | None = None
+    """``tuned``: every trial starts from the registry's tuned configuration of its task, algorithm and
+    budget (``tuned/<task>/<algo>.yaml``, ``lac-sweep registry`` lists them) instead of the algorithm's
+    defaults; refused before Ray starts where the registry has none or its env fingerprint differs."""
     score: Literal["eval", "train"] | None = None
     """What every trial is ranked on (sweeps/score.py): ``eval``, the evaluation block's deterministic
     episodes (default; ``train`` when ``eval_episodes`` is 0), or ``train``, the mean over its final
@@ -510,6 +543,18 @@ class SweepFile(BaseModel):
         if self.cost_limits is not None and "cost_limit" in self.set:
             raise KeyedError(("set", "cost_limit"), "cost_limit set beside cost_limits; accepted: one of them "
                              "(a ladder of one limit: cost_limits: [b])")
+        if self.search == {}:
+            raise KeyedError(("search",), "an empty search; accepted: default, or field → a distribution")
+        if self.tune is not None:
+            for key in ("search", "cost_limits", "frontier", "preset", "scheduler"):
+                if getattr(self, key) not in (None, "none"):
+                    raise KeyedError((key,), f"{key} with tune: a tuned comparison searches each algorithm's own "
+                                     "space at one limit; accepted: tune with algo (a list) or a grid over algo")
+            if self.task is not None and len(self.task) > 1:
+                raise KeyedError(("task",), "a tuned comparison tunes one task; run one sweep per task")
+        if self.preset == "tuned" and self.search is not None:
+            raise KeyedError(("preset",), "preset tuned with a search: the registry's configurations are points; "
+                             "accepted: preset tuned with grid or groups (or neither: one configuration)")
         if self.search is not None:
             if self.grid is not None or self.groups is not None or self.groups_at:
                 raise KeyedError(("search",), "give search or grid/groups, not both")
@@ -652,7 +697,8 @@ def first_error(e: ValidationError, origin: Origin) -> str:
 
 def _model_at(loc: tuple) -> type[BaseModel] | None:
     """The schema model a key path points into (for the accepted keys of an unknown-key error)."""
-    inner = {"seeds": Seeds, "task": UserEnv, "groups": Group, "groups_at": GroupsAt, "search": Distribution}
+    inner = {"seeds": Seeds, "task": UserEnv, "groups": Group, "groups_at": GroupsAt, "search": Distribution,
+             "tune": TuneSpec}
     mappings = {"groups", "search"}  # field → {name: model}: the next part is a name, not a key
     model, skip = SweepFile, False
     for part in loc:
@@ -719,12 +765,12 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
     top_algos = _algos_of(sweep.algo, sweep.set, {}, ("set",), search_dirs)
     if sweep.search is not None:
         algos = top_algos
-        if ALGO_FIELD in sweep.search:
+        if isinstance(sweep.search, dict) and ALGO_FIELD in sweep.search and sweep.search[ALGO_FIELD] != "default":
             algos = _algos_of(top_algos, {}, {ALGO_FIELD: sweep.search[ALGO_FIELD].values_to_check()},
                               ("search",), search_dirs)
         _check_set(sweep.set, algos, ("set",))
-        for name, dist in sweep.search.items():
-            if name != ALGO_FIELD:
+        for name, dist in ({} if sweep.search == "default" else sweep.search).items():
+            if name != ALGO_FIELD and dist != "default":  # a declared range is the field's own
                 for value in dist.values_to_check():
                     _check_field(name, value, algos, ("search", name, dist.kind))
         return
@@ -838,7 +884,7 @@ def reference_markdown() -> str:
     """docs/sweeps.md's "Sweep file reference": every key of every part of the schema, from its
     docstring (test_docs keeps the file in sync: ``python -m sweeps.sweep_file``)."""
     lines = []
-    for model in (SweepFile, Group, GroupsAt, Seeds, Distribution, UserEnv, Frontier):
+    for model in (SweepFile, Group, GroupsAt, Seeds, Distribution, UserEnv, Frontier, TuneSpec):
         lines += [f"#### `{model.__name__}`", "", " ".join((model.__doc__ or "").split()), "",
                   "| key | type | default | what it is |", "|---|---|---|---|"]
         for name, f in model.model_fields.items():

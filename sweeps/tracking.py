@@ -40,6 +40,8 @@ P_ALGO, ALGO_TAG = "algo", "lac.algo"  # which algorithm the run trained (a regi
 P_SWEPT_PARAM, P_SWEPT_VALUE = "swept_param", "swept_value"  # the grid point: which field, which value
 CONFIG_ID_TAG = "lac.config_id"  # a child run's configuration without its seed (spaces.config_id)
 CONFIG_TAG = "lac.config"  # the same, readable (group-param=value-task, or the search sample)
+#: A trial's env fingerprint (lac_rllib/tasks/fingerprint.py): its id, and the whole as JSON.
+ENV_FINGERPRINT_TAG, ENV_FINGERPRINT_JSON_TAG = "lac.env_fingerprint", "lac.env_fingerprint_json"
 DEFAULT_TAG = "lac.default_config"  # "1" on runs of LAC's defaults: the report's baseline
 PARENT_TAG = "mlflow.parentRunId"
 NOTE_TAG = "mlflow.note.content"  # a run's description, rendered as markdown on its page

@@ -52,6 +52,8 @@ from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
     DEFAULT_TAG,
+    ENV_FINGERPRINT_JSON_TAG,
+    ENV_FINGERPRINT_TAG,
     ERROR_TAG,
     NODE_TAG,
     P_ALGO,
@@ -95,6 +97,16 @@ def evaluation_block(checkpoint: str, episodes: int, seed: int, modes=EVAL_MODES
             for mode in modes if mode in policy.actions]
 
 
+def fingerprint_tags(task: str, params: dict) -> dict:
+    """The trial's env fingerprint as its MLflow tags (its id, and the whole as JSON). A trial on
+    several CPUs splits its ``num_envs_per_env_runner`` envs over its runners (constrained/cpus.py):
+    the envs of an iteration, what the fingerprint counts, do not change with its CPUs."""
+    from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
+
+    fp = fingerprint(task, params)
+    return {ENV_FINGERPRINT_TAG: fingerprint_id(fp), ENV_FINGERPRINT_JSON_TAG: json.dumps(fp, default=str)}
+
+
 class SweepTrial(tune.Trainable):
     """One trial. config: ``trial`` (a grid trial's TrialSpec, its fields resolved at plan time)
     or, for a search, ``task``, ``budget``, ``sets``, ``seeds`` and the sampled ``overrides``
@@ -130,7 +142,9 @@ class SweepTrial(tune.Trainable):
                 # MLflow's UI groups runs by a tag and averages their curves: one group per configuration.
                 CONFIG_ID_TAG: spaces.config_id(spec.task, self.timesteps, {P_ALGO: algo, **self.algo_config.params()}),
                 ALGO_TAG: algo,
-                CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if spec.default else "0"}
+                CONFIG_TAG: spec.config_label(), DEFAULT_TAG: "1" if spec.default else "0",
+                # What environment it learned in: reports never rank runs of different ones together.
+                **fingerprint_tags(spec.task, self.algo_config.params())}
         self.tracker.open(params, tags)
         prev = self.tracker.previous
         # A trial killed after its run FINISHED but before Tune persisted its last checkpoint is

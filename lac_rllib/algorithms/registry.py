@@ -237,6 +237,11 @@ def actions(algo: str) -> tuple[str, ...]:
     return tuple(algo_config(algo).ACTIONS)
 
 
+def search_space(algo: str) -> dict:
+    """``algo``'s declared search space: field → :class:`~lac_rllib.constrained.search_space.Searched`."""
+    return dict(algo_config(algo).SEARCH_SPACE)
+
+
 def speed_fields(algo: str) -> frozenset:
     """``algo``'s fields that change how fast a run goes, not what it learns."""
     return frozenset(algo_config(algo).SPEED_FIELDS)

@@ -84,6 +84,9 @@ class SafeTaskConfig:
     ACTIONS: tuple[str, ...] = ("generator",)
     #: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
     SPEED_FIELDS: frozenset = frozenset()
+    #: The fields a search tunes by default (``search: default``, a tuned comparison's ``tune:``):
+    #: field → its range, scale and source (lac_rllib/constrained/search_space.py).
+    SEARCH_SPACE: dict = {}
     #: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS): budget → task preset (or
     #: ``"*"``: any other) → field values; none: the preset's own values.
     BUDGET_FIELDS: dict[str, dict[str, dict[str, Any]]] = {}

@@ -42,6 +42,8 @@ from sweeps.tracking import (
     CONFIG_ID_TAG,
     CONFIG_TAG,
     DEFAULT_TAG,
+    ENV_FINGERPRINT_JSON_TAG,
+    ENV_FINGERPRINT_TAG,
     P_ALGO,
     P_GROUP,
     P_SEED,
@@ -74,6 +76,8 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                      "seed": int(p.get(P_SEED, 0)), "algo": p.get(P_ALGO, DEFAULT_ALGO),
                      "config": run.data.tags.get(CONFIG_TAG, ""), "config_id": run.data.tags.get(CONFIG_ID_TAG, ""),
                      "default": run.data.tags.get(DEFAULT_TAG) == "1",
+                     ENV_COLUMN: run.data.tags.get(ENV_FINGERPRINT_TAG, ""),
+                     ENV_JSON_COLUMN: run.data.tags.get(ENV_FINGERPRINT_JSON_TAG, ""),
                      "status": ("STOPPED" if run.data.tags.get(STOPPED_TAG) else "TERMINATED")
                      if run.info.status == "FINISHED" else "ERROR",
                      **{k: m.get(k, float("nan")) for k in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT, FEASIBLE,
@@ -84,7 +88,46 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
         # The score the trial was ranked on when it ended (its tag); a run from before the tag: train.
         rows[-1] = scored(rows[-1], curves[tid], m, run.data.tags.get(SCORE_TAG, TRAIN))
-    return pd.DataFrame(rows), curves
+    return split_environments(pd.DataFrame(rows)), curves
+
+
+#: A trial's env fingerprint id and the whole (lac_rllib/tasks/fingerprint.py; its tags).
+ENV_COLUMN, ENV_JSON_COLUMN = "env_fingerprint", "env_fingerprint_json"
+#: How a task's runs in another environment are labelled: the task, then the fingerprint's id.
+ENV_LABEL = " @env:"
+
+
+def split_environments(trials: pd.DataFrame) -> pd.DataFrame:
+    """Runs of one task in different environments (env fingerprints) are never ranked together: where
+    a task's trials carry more than one fingerprint, each is its own task, ``TASK @env:ID``, in every
+    report (summary, frontier, ladder, table, confirmation, the tuned comparison). A trial without a
+    fingerprint (recorded before there was one) stays with the task."""
+    if not len(trials) or ENV_COLUMN not in trials:
+        return trials
+    trials = trials.copy()
+    for task, g in trials.groupby("task", sort=False):
+        ids = [i for i in dict.fromkeys(g[ENV_COLUMN]) if i]
+        if len(ids) > 1:
+            known = g[ENV_COLUMN].astype(bool)
+            trials.loc[g.index[known], "task"] = [f"{task}{ENV_LABEL}{i}" for i in g.loc[known, ENV_COLUMN]]
+    return trials
+
+
+def environment_note(trials: pd.DataFrame) -> str:
+    """One line per task split by :func:`split_environments`, naming what differs between its environments."""
+    from lac_rllib.tasks.fingerprint import differences
+
+    if not len(trials) or ENV_COLUMN not in trials:
+        return ""
+    split = trials[trials["task"].astype(str).str.contains(ENV_LABEL, regex=False)]
+    lines = []
+    for task, g in split.groupby(split["task"].astype(str).str.split(ENV_LABEL).str[0], sort=False):
+        fps = {i: json.loads(j) for i, j in zip(g[ENV_COLUMN], g[ENV_JSON_COLUMN]) if j}
+        ids = list(fps)
+        diff = "; ".join(f"{a} vs {b}: {differences(fps[a], fps[b])}" for a, b in zip(ids, ids[1:]))
+        lines.append(f"**Not ranked together**: `{task}` ran in {len(ids)} environments ({', '.join(ids)}), "
+                     f"reported apart as `{task}{ENV_LABEL}ID`: {diff}.")
+    return "\n".join(lines)
 
 
 def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> dict:
@@ -163,6 +206,9 @@ def close_sweep(tracker: SweepTracker, parent: str, n_errors: int, heading: str,
             lead = (table_note if several else "") or algorithm_comparison(summary)
             if lead:
                 note = note.replace(heading, heading + "\n\n" + lead, 1)[:7990]
+            split = environment_note(trials)
+            if split:  # said first: the tables below rank each environment apart
+                note = note.replace(heading, heading + "\n\n" + split, 1)[:7990]
             nothing = nothing_feasible_markdown(summary)
             if nothing:  # said first, before any table (issue 36)
                 note = note.replace(heading, heading + "\n\n" + nothing, 1)[:7990]

@@ -17,6 +17,7 @@ from typing import Any
 
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
+from lac_rllib.constrained.search_space import Searched, lr
 from lac_rllib.constrained.trust_region_config import (
     OMNISAFE_STEP,
     SSA_TRUST_REGION,
@@ -81,6 +82,11 @@ class CPOConfig(TrustRegionConfig):
 
     ALGO = "cpo"
     PARAMS, FIELDS, PRESETS = CPOParams, fields.FieldSet(CPOParams, "CPO"), PRESETS
+    SEARCH_SPACE = {
+        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
+        "cg_damping": lr("docs/baselines-audit: the damping convention differs act_dim× between references"),
+        "critic_lr": lr("[O] the critics' lr (CPO's cost critic sets its recovery steps)"),
+    }
     REPORTED_KEYS = (*TRUST_REGION_KEYS, metrics.COST_GAP, metrics.CPO_CASE)
     ALGORITHM_CLASS = "lac_rllib.algorithms.cpo.algorithm.CPO"
     LEARNER_CLASS = "lac_rllib.algorithms.cpo.learner.CPOTorchLearner"

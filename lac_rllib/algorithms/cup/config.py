@@ -21,6 +21,7 @@ from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, OnPolicyLagParams
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, Searched, lr
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -65,6 +66,13 @@ class CUPConfig(PPOLagConfig):
 
     ALGO = "cup"
     PARAMS, FIELDS, PRESETS = CUPParams, fields.FieldSet(CUPParams, "CUP"), PRESETS
+    SEARCH_SPACE = {
+        "lr": lr(POLICY_LR),
+        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+        "target_kl": Searched("loguniform", "[O] its projection's KL bound, 0.01 or 0.02 across presets",
+                              around=3.0),
+    }
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.PROJECTION_LOSS, metrics.PROJECTION_EPOCHS, metrics.PROJECTION_KL)
     ALGORITHM_CLASS = "lac_rllib.algorithms.cup.algorithm.CUP"
     LEARNER_CLASS = "lac_rllib.algorithms.cup.learner.CUPTorchLearner"

@@ -21,6 +21,7 @@ from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import BOOL, POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, OnPolicyLagParams
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, Searched, lr
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "paper")
 
@@ -89,6 +90,13 @@ class FOCOPSConfig(PPOLagConfig):
 
     ALGO = "focops"
     PARAMS, FIELDS, PRESETS = FOCOPSParams, fields.FieldSet(FOCOPSParams, "FOCOPS"), PRESETS
+    SEARCH_SPACE = {
+        "lr": lr(POLICY_LR),
+        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "focops_lam": Searched("uniform", "[F] Zhang et al. 2020 study FOCOPS's sensitivity to λ", (0.5, 3.0)),
+        "focops_eta": Searched("loguniform", "[F] the trust-region indicator's radius δ (its KL bound)",
+                               around=3.0),
+    }
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.TRUST_REGION_FRACTION)
     ALGORITHM_CLASS = "lac_rllib.algorithms.focops.algorithm.FOCOPS"
     LEARNER_CLASS = "lac_rllib.algorithms.focops.learner.FOCOPSTorchLearner"

@@ -37,6 +37,7 @@ from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.off_policy_config import OffPolicyConfig
 from lac_rllib.constrained.precision import DTYPE_CHOICES as LANGEVIN_DTYPES
 from lac_rllib.constrained.precision import resolve_dtype
+from lac_rllib.constrained.search_space import Searched
 from lac_rllib.constrained.task_config import SafeTaskParams
 
 CHAIN_AT = ("next", "current")
@@ -240,6 +241,14 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
 
     ALGO = "lac"
     PARAMS, FIELDS, PRESETS = LACParams, FIELDS, PRESETS
+    #: LAC's four: the chain's length T, step size η, temperature λ, KL weight β (the paper's
+    #: Table 3 ablation varies each; these ranges span its values, sweeps/builtin/search.yaml).
+    SEARCH_SPACE = {
+        "langevin_steps": Searched("int", "[P] Table 3 varies T; Algorithm 1's chain length", (10, 100)),
+        "langevin_step_size": Searched("loguniform", "[P] Table 3 varies η (Algorithm 1's step)", (1e-5, 1e-3)),
+        "temperature": Searched("loguniform", "[P] Table 3 varies λ (eq. 9's temperature)", (1e-4, 1e-2)),
+        "beta": Searched("uniform", "[P] Table 3 varies β (the actor's KL weight)", (0.0, 20.0)),
+    }
     #: What ``lac-eval --actions`` accepts for a LAC policy: the generator's mean, a draw from it,
     #: or Algorithm 1's chain.
     ACTIONS = ("generator", "stochastic", "langevin")

@@ -18,6 +18,7 @@ from typing import Any
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, NON_NEGATIVE, POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyParams
+from lac_rllib.constrained.search_space import POLICY_LR, Searched, lr
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -54,6 +55,12 @@ class P3OConfig(OnPolicyConfig):
 
     ALGO = "p3o"
     PARAMS, FIELDS, PRESETS = P3OParams, fields.FieldSet(P3OParams, "P3O"), PRESETS
+    SEARCH_SPACE = {
+        "lr": lr(POLICY_LR),
+        "kappa": Searched("loguniform", "Zhang et al. 2022 (P3O) study the penalty factor κ's sensitivity",
+                          around=5.0),
+        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+    }
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.COST_PENALTY)
     ALGORITHM_CLASS = "lac_rllib.algorithms.p3o.algorithm.P3O"
     LEARNER_CLASS = "lac_rllib.algorithms.p3o.learner.P3OTorchLearner"

@@ -19,6 +19,7 @@ from lac_rllib.algorithms.cpo import config as cpo
 from lac_rllib.algorithms.cpo.config import CostStepParams, CPOConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
+from lac_rllib.constrained.search_space import Searched, lr
 from lac_rllib.constrained.trust_region_config import OMNISAFE_STEP
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
@@ -60,6 +61,11 @@ class PCPOConfig(CPOConfig):
 
     ALGO = "pcpo"
     PARAMS, FIELDS, PRESETS = PCPOParams, fields.FieldSet(PCPOParams, "PCPO"), PRESETS
+    SEARCH_SPACE = {
+        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
+        "cg_damping": lr("docs/baselines-audit: the damping convention differs act_dim× between references"),
+        "critic_lr": lr("[O] the critics' lr (PCPO's cost critic sets its projection)"),
+    }
     REPORTED_KEYS = tuple(k for k in CPOConfig.REPORTED_KEYS if k != metrics.CPO_CASE)  # no cases
     ALGORITHM_CLASS = "lac_rllib.algorithms.pcpo.algorithm.PCPO"
     LEARNER_CLASS = "lac_rllib.algorithms.pcpo.learner.PCPOTorchLearner"

@@ -12,6 +12,7 @@ from typing import Any
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.fields import POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.on_policy_config import ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyLagParams
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, Searched, lr
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "ssa")
 
@@ -60,5 +61,12 @@ class PPOLagConfig(OnPolicyConfig):
 
     ALGO = "ppo_lag"
     PARAMS, FIELDS, PRESETS = PPOLagParams, fields.FieldSet(PPOLagParams, "PPO-Lag"), PRESETS
+    SEARCH_SPACE = {
+        "lr": lr(POLICY_LR),
+        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+        "target_kl": Searched("loguniform", "[O] 0.01 or 0.02 across its presets: a factor 3 either side",
+                              around=3.0),
+    }
     ALGORITHM_CLASS = "lac_rllib.algorithms.ppo_lag.algorithm.PPOLag"
     LEARNER_CLASS = "lac_rllib.algorithms.ppo_lag.learner.PPOLagTorchLearner"

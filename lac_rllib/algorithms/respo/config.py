@@ -33,6 +33,7 @@ from lac_rllib.constrained.fields import (
     param,
 )
 from lac_rllib.constrained.on_policy_config import ACTIVATIONS, NU_PARAMETRIZATIONS, OnPolicyLagParams
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, lr
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny")
 P_INIT = 0.25  # [G] penalty_param = 0.25, ν = softplus(p)
@@ -139,6 +140,11 @@ class RESPOConfig(PPOLagConfig):
 
     ALGO = "respo"
     PARAMS, FIELDS, PRESETS = RESPOParams, fields.FieldSet(RESPOParams, "RESPO"), PRESETS
+    SEARCH_SPACE = {
+        "lr": lr(POLICY_LR),
+        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "reach_critic_lr": lr("RESPO's authors' code: its reachability critic learns on a timescale of its own"),
+    }
     REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.REACH_VF_LOSS, metrics.REACH_PROB_MEAN)
     ALGORITHM_CLASS = "lac_rllib.algorithms.respo.algorithm.RESPO"
     RL_MODULE_CLASS = "lac_rllib.algorithms.respo.module.RESPOTorchRLModule"

@@ -36,6 +36,7 @@ from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
 from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.off_policy_config import OffPolicyConfig
 from lac_rllib.constrained.precision import DTYPE_CHOICES, resolve_dtype
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, lr
 from lac_rllib.constrained.task_config import SafeTaskParams
 
 LAGRANGIAN_RULES = ("adam", "gradient")
@@ -195,6 +196,12 @@ class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
 
     ALGO = "sac_lag"
     PARAMS, FIELDS, PRESETS = SACLagParams, FIELDS, PRESETS
+    SEARCH_SPACE = {
+        "actor_lr": lr("[O] SACLag.yaml's actor lr spans 5e-6 to 3e-4 across task families"),
+        "critic_lr": lr("[O] SACLag.yaml's critic lr spans 3e-4 to 1e-3 across task families"),
+        "alpha": lr("[O] SACLag.yaml's entropy weight spans 1e-5 to 0.2 across task families"),
+        "lagrangian_lr": lr(MULTIPLIER_LR),
+    }
     #: What ``lac-eval --actions`` accepts: squash(μ(s)) (module.deterministic_action), or a draw from π.
     ACTIONS = ("generator", "stochastic")
     SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads", "update_path"})

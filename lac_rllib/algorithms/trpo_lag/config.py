@@ -12,6 +12,7 @@ from typing import Any
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.fields import one_of, or_none, param
 from lac_rllib.constrained.on_policy_config import OnPolicyLagParams
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, Searched, lr
 from lac_rllib.constrained.trust_region_config import (
     SSA_TRUST_REGION,
     TRUST_REGION_PRESETS,
@@ -47,5 +48,11 @@ class TRPOLagConfig(TrustRegionConfig):
 
     ALGO = "trpo_lag"
     PARAMS, FIELDS, PRESETS = TRPOLagParams, fields.FieldSet(TRPOLagParams, "TRPO-Lag"), PRESETS
+    SEARCH_SPACE = {
+        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
+        "cg_damping": lr("docs/baselines-audit: the damping convention differs act_dim× between references"),
+        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "critic_lr": lr("[O] the critics' lr, 1e-3 everywhere: a decade either side"),
+    }
     ALGORITHM_CLASS = "lac_rllib.algorithms.trpo_lag.algorithm.TRPOLag"
     LEARNER_CLASS = "lac_rllib.algorithms.trpo_lag.learner.TRPOLagTorchLearner"

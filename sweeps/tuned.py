@@ -1,0 +1,227 @@
+"""A tuned comparison (a sweep file's ``tune:``): every algorithm tuned as LAC is, at equal budgets.
+
+Comparing one tuned algorithm with untuned ones is the unfairness the literature names (Eimer,
+Lindauer & Raileanu, ICML 2023; Hamilton et al. 2022). Here each algorithm the sweep runs
+(``algo: [...]`` or a grid over ``algo``) gets the same search: its own declared search space
+(lac_rllib/constrained/search_space.py), ``tune.num_samples`` configurations × ``tune.seeds`` seeds
+× the budget's env steps under the same searcher, one sweep ``NAME-tune-ALGO`` each (refused before
+Ray starts unless the budgets are equal: :func:`check_equal_budgets`). Then one confirmation
+``NAME-confirm`` reruns every algorithm's best configuration (``ALGO-tuned1``…) beside its default
+(``ALGO-default``) on ``tune.confirm_seeds`` fresh seeds, and the report (sweeps/reports/tuned.py)
+says per algorithm what tuning changed; each winner goes to the registry (sweeps/tuned_registry.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+from sweeps import spaces
+from sweeps.plan import Plan, plan_sweep
+from sweeps.record import SWEEP_FILE
+from sweeps.sweep_file import SweepFile, check_fields
+
+TUNE, CONFIRM, TUNED, DEFAULT = "tune", "confirm", "tuned", "default"
+
+
+@dataclasses.dataclass(frozen=True)
+class TunedPlan:
+    """The plans of a tuned comparison: one search per algorithm, then the joint confirmation."""
+
+    sweep: SweepFile  #: the resolved sweep file with its ``tune:``
+    searches: dict  #: algo → its search's Plan
+    registry: Path  #: where the winners are written (tuned/<task>/<algo>.yaml)
+
+    @property
+    def name(self) -> str:
+        return self.sweep.name
+
+    @property
+    def task(self) -> str:
+        return next(iter(self.searches.values())).tasks[0]
+
+
+def tuned_algos(sweep: SweepFile) -> tuple[str, ...]:
+    """The algorithms a tuned comparison tunes: the grid's over ``algo``, else the sweep's ``algo``."""
+    from sweeps.resolve import swept_algos
+
+    return swept_algos(sweep) or tuple(sweep.algo)
+
+
+def search_sweep(sweep: SweepFile, algo: str, task: str) -> SweepFile:
+    """``algo``'s search: its declared space on ``task`` at the sweep's budget, with the tune's searcher,
+    samples and seeds and the sweep's ``set`` (and its groups' fields beside ``algo``)."""
+    groups = [g for g in (sweep.groups or {}).values() if algo in g.grid.get("algo", (algo,))]
+    sets = {**sweep.set, **{k: v for g in groups for k, v in g.set.items() if k != "algo"}}
+    data = sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name", "seeds",
+                                                         "searcher", "num_samples", "description", "set"})
+    t = sweep.tune
+    search = spaces.declared_search(algo, task, sweep.budget, sets, "default")
+    out = SweepFile.model_validate({**data, "algo": [algo], "set": sets, "search": search, "searcher": t.searcher,
+                                    "num_samples": t.num_samples, "seeds": t.seeds.model_dump(exclude_none=True),
+                                    "name": f"{sweep.name}-{TUNE}-{algo}",
+                                    "description": f"{sweep.name}: {algo} over its search space"})
+    check_fields(out)
+    return out
+
+
+def budget_of(plan: Plan) -> tuple[int, int, int]:
+    """A search's budget: (configurations, seeds each, env steps per trial)."""
+    return plan.sweep.num_samples, len(plan.seeds), plan.timesteps
+
+
+def check_equal_budgets(budgets: dict) -> None:
+    """Every algorithm's search at the same configurations × seeds × env steps, else a ValueError
+    naming the first that differs from the first algorithm's."""
+    items = list(budgets.items())
+    first_algo, first = items[0]
+    for algo, b in items[1:]:
+        if tuple(b) != tuple(first):
+            raise ValueError(f"tune: unequal budgets: {algo} gets {_budget_text(b)}, {first_algo} "
+                             f"{_budget_text(first)}; accepted: the same samples × seeds × env steps for all")
+
+
+def _budget_text(b) -> str:
+    return f"{b[0]} samples × {b[1]} seeds × {b[2]:,} env steps"
+
+
+def make_tuned_plan(sweep: SweepFile, space: str, infra, search_dirs=(), origin=None, max_trials: int = 5_000,
+                    registry: Path | None = None) -> TunedPlan:
+    """Every algorithm's search planned (a user's env built once), their budgets checked equal."""
+    from sweeps.plan import resolve_tasks
+    from sweeps.tuned_registry import DEFAULT_REGISTRY
+
+    tasks, _ = resolve_tasks(sweep, search_dirs, origin)
+    searches = {}
+    for algo in tuned_algos(sweep):
+        sub = search_sweep(sweep, algo, tasks[0])
+        own = dataclasses.replace(infra, resume=infra.resume and (Path(infra.storage) / sub.name / SWEEP_FILE).exists())
+        searches[algo] = plan_sweep(sub, TUNE, own, search_dirs, origin, max_trials=max_trials)
+    check_equal_budgets({a: budget_of(p) for a, p in searches.items()})
+    return TunedPlan(sweep=sweep, searches=searches, registry=Path(registry or DEFAULT_REGISTRY))
+
+
+def print_tuned_plan(tp: TunedPlan) -> None:
+    """The comparison's budgets before anything runs: equal by construction, said per algorithm."""
+    t = tp.sweep.tune
+    first = next(iter(tp.searches.values()))
+    print(f"tuned comparison '{tp.name}': {', '.join(tp.searches)} on {tp.task}, budget {tp.sweep.budget}, "
+          f"{t.searcher.upper()} with the feasibility constraint")
+    for algo, p in tp.searches.items():
+        n, seeds, steps = budget_of(p)
+        print(f"  {algo:>10}: {_budget_text((n, seeds, steps))} = {n * seeds * steps:,} env steps, "
+              f"~{p.estimated_cpu_h:.2f} CPU-hours (its speed), search over {', '.join(p.sweep.search)}")
+    print(f"  then: each algorithm's best {t.top} beside its default on {t.confirm_seeds} fresh seeds "
+          f"(from {max(first.seeds) + 1}), all in one confirmation '{tp.name}-{CONFIRM}'")
+    print(f"  registry: {tp.registry}", flush=True)
+
+
+def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
+    """One sweep of every algorithm's winners (``ALGO-tunedK``) and default (``ALGO-default``) on the
+    fresh seeds after the searches' largest, at the same budget."""
+    groups = {}
+    for algo, tops in winners.items():
+        for k, w in enumerate(tops, 1):
+            groups[f"{algo}-{TUNED}{k}"] = {"set": {"algo": algo, **w["fields"]}}
+        groups[f"{algo}-{DEFAULT}"] = {"set": {"algo": algo}}
+    first = next(iter(tp.searches.values()))
+    data = tp.sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name",
+                                                            "seeds", "searcher", "num_samples", "description"})
+    return SweepFile.model_validate({**data, "groups": groups, "name": f"{tp.name}-{CONFIRM}", "searcher": "grid",
+                                     "seeds": {"count": tp.sweep.tune.confirm_seeds, "start": max(first.seeds) + 1},
+                                     "description": f"confirmation of {tp.name}: each algorithm tuned and default"})
+
+
+def pick_winners(summary, fields_of: dict, k: int) -> list[dict]:
+    """A search's ``k`` best configurations: the mean-feasible ones by the lower end of their return
+    interval (then the mean), else, where none is feasible, the least costly: every algorithm has a
+    tuned configuration to confirm (it may fail to hold up)."""
+    done = summary[summary["n_seeds"] > 0]
+    ok = done[done["mean_feasible"].astype(bool)]
+    if len(ok):
+        key = ok["return_mean_ci_low"].fillna(-math.inf)
+        order = ok.assign(_k=key).sort_values(["_k", "return_mean"], ascending=False)
+    else:
+        order = done.sort_values(["cost_mean", "return_mean"], ascending=[True, False])
+    return [{"config": r["config"], "fields": fields_of.get(r["config"], {}), "feasible": bool(len(ok)),
+             "search": {c: _plain(r.get(c)) for c in ("return_mean", "return_mean_ci_low", "return_mean_ci_high",
+                                                      "cost_mean", "feasible_fraction", "n_seeds")}}
+            for r in order.head(k).to_dict("records")]
+
+
+def _plain(v):
+    return v.item() if hasattr(v, "item") else v
+
+
+def search_results(plan: Plan):
+    """A finished sweep's trials (with its searched fields) and summary, read back from MLflow."""
+    from sweeps.record import parent_run_id
+    from sweeps.reports.report import summarize
+    from sweeps.reports.results import sweep_results
+    from sweeps.tracking import SweepTracker
+
+    tracker = SweepTracker(plan.tracking_uri, plan.experiment)
+    trials, _ = sweep_results(tracker, parent_run_id(Path(plan.storage) / plan.name), tuple(plan.sweep.search or ()))
+    return trials, summarize(trials)
+
+
+def run_tuned(tp: TunedPlan, run_locked) -> int:
+    """Each algorithm's search, then the joint confirmation, then the report and the registry
+    (``run_locked``: sweeps/run.py's, running one plan into its directory under its lock). A search
+    already finished (``--resume`` after a stop) is read back, not run again."""
+    from sweeps.record import checked_sweep_dir
+    from sweeps.tracking import SweepTracker
+
+    print_tuned_plan(tp)
+    winners, searched = {}, {}
+    for algo, plan in tp.searches.items():
+        sweep_dir = Path(plan.storage) / plan.name
+        if _finished(plan, sweep_dir):
+            print(f"tune: {plan.name} finished earlier: its results are read back", flush=True)
+        else:
+            rc = run_locked(plan, checked_sweep_dir(plan))
+            if rc != 0:
+                return rc
+        trials, summary = search_results(plan)
+        fields_of = {r["config"]: {f: r[f] for f in plan.sweep.search if f in r} for r in trials.to_dict("records")}
+        winners[algo] = pick_winners(summary, fields_of, tp.sweep.tune.top)
+        searched[algo] = (trials, summary)
+        if not winners[algo]:
+            print(f"tune: {algo}'s search finished no configuration; nothing to confirm", flush=True)
+            return 1
+    cfile = confirmation_sweep(tp, winners)
+    first = next(iter(tp.searches.values()))
+    infra = dataclasses.replace(first.infra, resume=(Path(first.storage) / cfile.name / SWEEP_FILE).exists())
+    confirmation = plan_sweep(cfile, CONFIRM, infra)
+    if not _finished(confirmation, Path(confirmation.storage) / confirmation.name):
+        rc = run_locked(confirmation, checked_sweep_dir(confirmation))
+        if rc != 0:
+            return rc
+    from sweeps.reports import tuned as report
+    from sweeps.tuned_registry import write_entries
+
+    trials, _ = search_results(confirmation)
+    comparison = report.comparison(searched, winners, trials)
+    text = report.markdown(tp, comparison)
+    tracker = SweepTracker(confirmation.tracking_uri, confirmation.experiment)
+    from sweeps.record import parent_run_id
+
+    parent = parent_run_id(Path(confirmation.storage) / confirmation.name)
+    tracker.client.log_text(parent, text, "tuned/report.md")
+    (Path(confirmation.storage) / confirmation.name / "tuned.md").write_text(text)
+    written = write_entries(tp, comparison, winners, parent, {a: p for a, p in tp.searches.items()}, trials)
+    print(text)
+    print("registry: " + ", ".join(str(p) for p in written), flush=True)
+    return 0
+
+
+def _finished(plan: Plan, sweep_dir: Path) -> bool:
+    """Whether the sweep in ``sweep_dir`` ran to its end (its parent run FINISHED in MLflow)."""
+    if not (sweep_dir / SWEEP_FILE).exists():
+        return False
+    from sweeps.record import parent_run_id
+    from sweeps.tracking import SweepTracker
+
+    run = SweepTracker(plan.tracking_uri, plan.experiment).client.get_run(parent_run_id(sweep_dir))
+    return run.info.status == "FINISHED"

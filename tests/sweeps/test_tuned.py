@@ -1,0 +1,215 @@
+"""Algorithms compared at equal tuning budgets (sweeps/tuned.py, sweeps/reports/tuned.py): each
+algorithm's declared search space, the equal budgets, the report's figures by hand, and the whole
+comparison from one sweep file to the registry and back through ``preset: tuned``."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lac_rllib.algorithms.registry import ALGOS, search_space
+from sweeps import run as cli
+from sweeps import spaces
+from sweeps.reports import tuned as report
+from sweeps.tuned import check_equal_budgets
+
+TASKS = ("lac/PointHazard-v0", "SafetyPointGoal1-v0", "focops/SwimmerVelocity-v0")  # tiny, safety_gym, mujoco
+
+TUNED = """task: lac/PointHazard-v0
+budget: smoke
+algo: [lac, ppo_lag]
+eval_episodes: 1
+tune: {num_samples: 2, seeds: 1, confirm_seeds: 2}
+"""
+
+
+def _args(tmp_path, text, *extra):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    return cli.parse_args(["--config", str(path), "--experiment", "test", "--tracking-uri",
+                           f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr"),
+                           "--registry", str(tmp_path / "registry"), *extra])
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_every_algorithm_declares_a_search_space_that_holds_its_defaults(algo):
+    declared = search_space(algo)
+    assert len(declared) >= 3 and all(d.source for d in declared.values()), declared
+    for task in TASKS:
+        search = spaces.declared_search(algo, task, "quick", {}, "default")
+        base = spaces.trial_params(task, "quick", {"algo": algo})
+        assert list(search) == list(declared)
+        for name, dist in search.items():
+            (kind, (low, high)), = dist.items()
+            assert low < high and low <= base[name] <= high, (algo, task, name, base[name], dist)
+
+
+def test_search_default_names_the_space_and_a_file_may_narrow_it(tmp_path):
+    whole = cli.make_plan(_args(tmp_path, "algo: trpo_lag\nbudget: smoke\nsearch: default\nnum_samples: 1\n"))
+    assert set(whole.sweep.search) == {"target_kl", "cg_damping", "lagrangian_lr", "critic_lr"}
+    assert whole.sweep.search["target_kl"].loguniform == pytest.approx((0.02 / 3, 0.06))  # around the tiny default
+    narrow = cli.make_plan(_args(tmp_path, "budget: smoke\nnum_samples: 1\nsearch:\n  langevin_steps: default\n"
+                                           "  temperature: {loguniform: [1.0e-4, 1.0e-3]}\n", "--name", "n2"))
+    assert narrow.sweep.search["langevin_steps"].int == (10, 100)
+    assert narrow.sweep.search["temperature"].loguniform == (1e-4, 1e-3) and len(narrow.sweep.search) == 2
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, "budget: smoke\nsearch: {alpha: default}\n", "--name", "n3"))
+    assert "alpha is not in lac's search space; accepted: langevin_steps" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_tuned_comparison_gives_every_algorithm_the_same_budget(tmp_path, capsys):
+    from sweeps.tuned import budget_of, print_tuned_plan
+
+    tp = cli.make_plan(_args(tmp_path, TUNED.replace("[lac, ppo_lag]", "[lac, ppo_lag, sac_lag, trpo_lag]")))
+    budgets = {a: budget_of(p) for a, p in tp.searches.items()}
+    assert set(budgets) == {"lac", "ppo_lag", "sac_lag", "trpo_lag"} and set(budgets.values()) == {(2, 1, 2000)}
+    assert all(set(p.sweep.search) == set(search_space(a)) for a, p in tp.searches.items())
+    print_tuned_plan(tp)
+    out = capsys.readouterr().out
+    assert out.count("2 samples × 1 seeds × 2,000 env steps = 4,000 env steps") == 4 and "CPU-hours" in out
+    with pytest.raises(ValueError) as e:  # a hand-made unequal plan
+        check_equal_budgets({"lac": (8, 3, 40_000), "ppo_lag": (8, 3, 40_000), "sac_lag": (8, 2, 40_000)})
+    assert "sac_lag gets 8 samples × 2 seeds" in str(e.value) and "lac 8 samples × 3 seeds" in str(e.value)
+
+
+@pytest.mark.parametrize("text,needle", [
+    (TUNED + "search: default\n", "s.yaml:6: search: search with tune"),
+    (TUNED + "cost_limits: [0, 2]\n", "cost_limits with tune"),
+    (TUNED.replace("task: lac/PointHazard-v0", "task: [lac/PointHazard-v0, SafetyPointGoal1-v0]"),
+     "a tuned comparison tunes one task"),
+    (TUNED.replace("num_samples: 2", "num_samples: 0"), "tune.num_samples: Input should be greater than or equal to 1"),
+    (TUNED.replace("num_samples: 2", "samples: 2"), "unknown key 'samples' (did you mean num_samples?)"),
+])
+def test_bad_tune_sections_are_refused_in_one_line(tmp_path, text, needle):
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, text))
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_confirm_top_beside_tune_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="--confirm-top with tune"):
+        cli.make_plan(_args(tmp_path, TUNED, "--confirm-top", "1"))
+
+
+def test_the_gap_and_p_improvement_and_the_winners_curse_by_hand():
+    tuned, default = [3.0, 4.0, 5.0], [1.0, 2.0, 3.5]
+    gap, low, high = report.gap_interval(tuned, default)
+    assert gap == pytest.approx(4.0 - 6.5 / 3) and low < gap < high and low > 0  # every resample favours tuned
+    assert report.probability_of_improvement(tuned, default) == pytest.approx(8 / 9)  # 3 < 3.5 the only loss
+    assert report.winners_curse(search_return=5.0, fresh_return=3.0) == 2.0
+    assert np.isnan(report.gap_interval([1.0], [2.0, 3.0])[1])  # one seed: no interval
+
+
+def test_sensitivity_by_hand():
+    summary = pd.DataFrame({"n_seeds": [3, 3, 3, 3, 0], "return_mean": [1.0, 2.0, 3.0, 10.0, 99.0],
+                            "cost_mean": [5.0, 1.0, 3.0, 2.0, 0.0], "mean_feasible": [False, True, True, True, True],
+                            "feasible_fraction": [0.0, 1.0, 2 / 3, 1.0, 1.0]})
+    s = report.sensitivity(summary)  # the unfinished configuration (n_seeds 0) is left out
+    assert s["configurations"] == 4
+    assert s["return_best_minus_median"] == pytest.approx(10 - 2.5) and s["return_iqr"] == pytest.approx(4.75 - 1.75)
+    assert s["cost_best_minus_median"] == pytest.approx(1 - 2.5) and s["cost_iqr"] == pytest.approx(3.5 - 1.75)
+    assert s["feasible_share"] == 0.75 and (s["feasible_fraction_min"], s["feasible_fraction_max"]) == (0.0, 1.0)
+
+
+def _confirmation(rows):
+    return pd.DataFrame([{"group": g, "status": "TERMINATED", "episode_return": r, "episode_cost": c,
+                          "feasible": float(c <= 2), "cost_limit": 2.0} for g, r, c in rows])
+
+
+def test_the_comparison_ranks_tuned_and_default_and_says_whether_tuning_changed_it():
+    # Defaults: A feasible (1.0), B infeasible (5.0): A > B. Tuned: B feasible at 3.0, A at 2.0: B > A.
+    trials = _confirmation([("A-default", 1.0, 0.0), ("A-default", 1.0, 1.0), ("B-default", 5.0, 9.0),
+                            ("B-default", 5.0, 8.0), ("A-tuned1", 2.0, 1.0), ("A-tuned1", 2.0, 0.0),
+                            ("B-tuned1", 3.0, 1.0), ("B-tuned1", 3.0, 2.0)])
+    summary = pd.DataFrame({"n_seeds": [3], "return_mean": [1.0], "cost_mean": [1.0], "mean_feasible": [True],
+                            "feasible_fraction": [1.0]})
+    winners = {a: [{"config": "c", "fields": {}, "feasible": True, "search": {"return_mean": 4.0}}] for a in "AB"}
+    comp = report.comparison({"A": (None, summary), "B": (None, summary)}, winners, trials)
+    assert comp["default_rank"] == ["A", "B"] and comp["tuned_rank"] == ["B", "A"] and comp["ranking_changed"]
+    a = comp["algorithms"]["A"]
+    assert a["gap"][0] == pytest.approx(1.0) and a["curse"] == pytest.approx(2.0) and a["tuned"]["p_feasible"] == 1.0
+    assert comp["algorithms"]["B"]["default"]["feasible"] is False
+
+
+@pytest.mark.slow
+def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_session, tmp_path, capsys):
+    import yaml
+
+    from sweeps.tuned import run_tuned
+    from sweeps.tuned_registry import listing
+
+    tp = cli.make_plan(_args(tmp_path, TUNED))
+    assert run_tuned(tp, cli.run_locked) == 0
+    out = capsys.readouterr().out
+    assert "## Tuned comparison" in out and "Ranking on the fresh seeds" in out
+    registry = tmp_path / "registry"
+    for algo in ("lac", "ppo_lag"):
+        entry = yaml.safe_load((registry / "lac/PointHazard-v0" / f"{algo}.yaml").read_text())
+        assert entry["fresh_seeds"] == [1, 2] and entry["search_seeds"] == [0] and entry["fresh"]["n_seeds"] == 2
+        assert set(entry["config"]) == set(search_space(algo)) and entry["mlflow"]["confirmation_run"]
+    # preset: tuned runs each entry: the trial's params are the entry's configuration.
+    plan = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
+                               "--name", "from-registry"))
+    for t in plan.trials:
+        entry = yaml.safe_load((registry / "lac/PointHazard-v0" / f"{t.algo}.yaml").read_text())
+        assert {k: t.params[k] for k in entry["config"]} == pytest.approx(entry["config"]) and not t.default
+    assert listing(registry).count("lac/PointHazard-v0") == 2
+
+
+def _entry(tmp_path, env: dict | None = None, **change) -> Path:
+    """A valid registry entry of ppo_lag on the tiny task (its fingerprint this machine's, with ``env``
+    changed in it), changed."""
+    import yaml
+
+    from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
+
+    config = {"lr": 0.002, "clip_param": 0.25}
+    fp = fingerprint("lac/PointHazard-v0", spaces.trial_params("lac/PointHazard-v0", "smoke", {"algo": "ppo_lag",
+                                                                                                 **config}))
+    fp = {**fp, **(env or {})}
+    scores = {"n_seeds": 2, "return_mean": 1.0, "return_ci": [0.5, 1.5], "cost_mean": 1.0, "cost_ci": [0.0, 2.0],
+              "p_feasible": 1.0}
+    data = {"task": "lac/PointHazard-v0", "algo": "ppo_lag", "budget": "smoke", "timesteps": 2000, "cost_limit": 2.0,
+            "config": config, "search_seeds": [0], "fresh_seeds": [1, 2], "fresh": scores, "default_fresh": scores,
+            "search": {"return_mean": 1.2}, "mlflow": {"tracking_uri": "sqlite:///x.db"}, "commit": "abc",
+            "fingerprint": fp, "fingerprint_id": fingerprint_id(fp), **change}
+    path = tmp_path / "registry" / "lac/PointHazard-v0" / "ppo_lag.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+PRESET = "algo: ppo_lag\nbudget: smoke\nseeds: 1\npreset: tuned\n"
+
+
+def test_preset_tuned_reads_a_good_entry(tmp_path):
+    _entry(tmp_path)
+    plan = cli.make_plan(_args(tmp_path, PRESET))
+    assert plan.trials[0].params["lr"] == 0.002 and plan.trials[0].params["clip_param"] == 0.25
+    # The sweep's own set wins over the entry (the entry sits where the defaults were).
+    plan = cli.make_plan(_args(tmp_path, PRESET + "set: {lr: 0.004}\n", "--name", "x2"))
+    assert plan.trials[0].params["lr"] == 0.004 and plan.trials[0].params["clip_param"] == 0.25
+
+
+def test_an_entry_of_another_environment_is_refused_naming_the_difference(tmp_path):
+    _entry(tmp_path, env={"mujoco": "0.0.1-other", "envs": 3})
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, PRESET))
+    assert "was tuned in another environment: envs 3 vs 1; mujoco 0.0.1-other vs" in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("tamper,needle", [
+    (lambda p: p.write_text("task: [unclosed\n"), "ppo_lag.yaml"),
+    (lambda p: p.write_text(p.read_text() + "hostile: 1\n"), "hostile: Extra inputs are not permitted"),
+    (lambda p: p.write_text(p.read_text().replace("clip_param: 0.25", "clip_param: -3.0")), "config.clip_param"),
+    (lambda p: p.write_text(p.read_text().replace("mujoco: ", "mujoco: 0.0.1-other #")),
+     "is not its fingerprint's ("),
+    (lambda p: p.write_text(p.read_text().replace("budget: smoke", "budget: quick")), "was tuned at budget quick"),
+    (lambda p: p.unlink(), "has no entry for ppo_lag on lac/PointHazard-v0"),
+])
+def test_a_tampered_or_missing_entry_is_refused_before_ray_in_one_line(tmp_path, tamper, needle):
+    tamper(_entry(tmp_path))
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, PRESET))
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
