@@ -63,7 +63,16 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     for key in ("num_samples", "scheduler", "max_concurrent", "cpus_per_trial", "experiment", "cost_limits"):
         if getattr(args, key) is not None:
             data[key] = getattr(args, key)
-    flags = {(k,): f for k, f in FLAG_OF.items() if getattr(args, k) is not None}
+    tune_flags = {}
+    if getattr(args, "tune", None) or getattr(args, "tune_seeds", None) or (data.get("tune") and args.confirm_seeds):
+        tune = dict(data.get("tune") or {})
+        for key, flag, value in (("num_samples", "--tune", args.tune), ("seeds", "--tune-seeds", args.tune_seeds),
+                                 ("confirm_seeds", "--confirm-seeds", args.confirm_seeds)):
+            if value is not None:
+                tune[key] = {"count": value} if key == "seeds" else value
+                tune_flags[("tune", key)] = flag
+        data["tune"] = tune
+    flags = {(k,): f for k, f in FLAG_OF.items() if getattr(args, k) is not None} | tune_flags
     flags |= {("set", k): f"--set {k}" for k in cli_sets}
     if algo_pairs:
         flags[("algo",)] = f"--set {ALGO_FIELD}"

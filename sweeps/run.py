@@ -123,6 +123,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--cost-limits", type=_limits, default=None, metavar="B1,B2,...",
                    help="a ladder of cost limits: every configuration runs at each (the sweep file's cost_limits; "
                         "lac-sweep calibrate --task ID proposes one)")
+    p.add_argument("--tune", type=_int_at_least(1), default=None, metavar="N",
+                   help="a tuned comparison of the sweep's algorithms (compare, table1, ...): each searched over its "
+                        "own space with N samples (the sweep file's tune.num_samples; docs/sweeps.md)")
+    p.add_argument("--tune-seeds", type=_int_at_least(1), default=None, metavar="K",
+                   help="seeds per sampled configuration of a tuned comparison (tune.seeds; default 3); its "
+                        "fresh seeds: --confirm-seeds (tune.confirm_seeds, default 5)")
     p.add_argument("--registry", default=None, metavar="DIR",
                    help="the registry of tuned configurations a tuned comparison writes and preset: tuned reads "
                         "(default: the repository's tuned/; lac-sweep registry lists it)")
@@ -153,10 +159,10 @@ def make_plan(args) -> Plan:
         if args.confirm_top:
             raise ValueError("--confirm-top with tune: a tuned comparison confirms every algorithm's winners "
                              "itself; accepted: tune.top and tune.confirm_seeds in the sweep file")
-        from sweeps.tuned import make_tuned_plan
+        from sweeps.tuned import make_tuned_plans
 
-        return make_tuned_plan(sweep, space, infra, module_search_dirs(args), origin, args.max_trials,
-                               registry=args.registry)
+        return make_tuned_plans(sweep, space, infra, module_search_dirs(args), origin, args.max_trials,
+                                registry=args.registry)
     plan = plan_sweep(sweep, space, infra, module_search_dirs(args), origin, max_trials=args.max_trials)
     if args.confirm_by != "return" and not args.confirm_top:
         raise ValueError(f"--confirm-by {args.confirm_by} without --confirm-top; accepted: --confirm-top K "
@@ -236,10 +242,10 @@ def main(argv=None) -> int:
     logging.getLogger("ray.rllib.algorithms.algorithm_config").setLevel(logging.ERROR)
     try:
         plan = make_plan(args)
-        if not isinstance(plan, Plan):  # a tuned comparison: each of its sweeps is checked as it starts
+        if not isinstance(plan, Plan):  # tuned comparisons (one per task): each search checked before Ray
             from sweeps.tuned import run_tuned
 
-            for sub in plan.searches.values():
+            for sub in (s for tp in plan for s in tp.searches.values()):
                 if sub.infra.resume or not (Path(sub.storage) / sub.name).exists():
                     checked_sweep_dir(sub)
         else:
@@ -248,7 +254,11 @@ def main(argv=None) -> int:
         print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
     if not isinstance(plan, Plan):
-        return run_tuned(plan, run_locked)
+        for tp in plan:
+            rc = run_tuned(tp, run_locked)
+            if rc != 0:
+                return rc
+        return 0
     rc = run_locked(plan, sweep_dir)
     if rc == 0 and plan.confirm:
         rc = run_confirmation(plan, sweep_dir)

@@ -550,8 +550,6 @@ class SweepFile(BaseModel):
                 if getattr(self, key) not in (None, "none"):
                     raise KeyedError((key,), f"{key} with tune: a tuned comparison searches each algorithm's own "
                                      "space at one limit; accepted: tune with algo (a list) or a grid over algo")
-            if self.task is not None and len(self.task) > 1:
-                raise KeyedError(("task",), "a tuned comparison tunes one task; run one sweep per task")
         if self.preset == "tuned" and self.search is not None:
             raise KeyedError(("preset",), "preset tuned with a search: the registry's configurations are points; "
                              "accepted: preset tuned with grid or groups (or neither: one configuration)")

@@ -42,17 +42,23 @@ class TunedPlan:
         return next(iter(self.searches.values())).tasks[0]
 
 
-def tuned_algos(sweep: SweepFile) -> tuple[str, ...]:
-    """The algorithms a tuned comparison tunes: the grid's over ``algo``, else the sweep's ``algo``."""
-    from sweeps.resolve import swept_algos
+def _group_algos(sweep: SweepFile, group) -> tuple[str, ...]:
+    """The algorithms a group runs: its grid's over ``algo``, else its set's, else the sweep's."""
+    return tuple(group.grid.get("algo") or ((group.set["algo"],) if "algo" in group.set else sweep.algo))
 
-    return swept_algos(sweep) or tuple(sweep.algo)
+
+def tuned_algos(sweep: SweepFile) -> tuple[str, ...]:
+    """The algorithms a tuned comparison tunes: those its groups run (a grid over ``algo``, or one
+    group per algorithm as the paper's tables have), else the sweep's ``algo``."""
+    groups = (sweep.groups or {}).values()
+    return tuple(dict.fromkeys(a for g in groups for a in _group_algos(sweep, g))) or tuple(sweep.algo)
 
 
 def search_sweep(sweep: SweepFile, algo: str, task: str) -> SweepFile:
     """``algo``'s search: its declared space on ``task`` at the sweep's budget, with the tune's searcher,
-    samples and seeds and the sweep's ``set`` (and its groups' fields beside ``algo``)."""
-    groups = [g for g in (sweep.groups or {}).values() if algo in g.grid.get("algo", (algo,))]
+    samples and seeds, the sweep's ``set`` and the fields its groups set beside ``algo`` (a table's
+    per-algorithm preset)."""
+    groups = [g for g in (sweep.groups or {}).values() if algo in _group_algos(sweep, g)]
     sets = {**sweep.set, **{k: v for g in groups for k, v in g.set.items() if k != "algo"}}
     data = sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name", "seeds",
                                                          "searcher", "num_samples", "description", "set"})
@@ -60,7 +66,7 @@ def search_sweep(sweep: SweepFile, algo: str, task: str) -> SweepFile:
     search = spaces.declared_search(algo, task, sweep.budget, sets, "default")
     out = SweepFile.model_validate({**data, "algo": [algo], "set": sets, "search": search, "searcher": t.searcher,
                                     "num_samples": t.num_samples, "seeds": t.seeds.model_dump(exclude_none=True),
-                                    "name": f"{sweep.name}-{TUNE}-{algo}",
+                                    "task": [task], "name": f"{sweep.name}-{TUNE}-{algo}",
                                     "description": f"{sweep.name}: {algo} over its search space"})
     check_fields(out)
     return out
@@ -86,9 +92,25 @@ def _budget_text(b) -> str:
     return f"{b[0]} samples × {b[1]} seeds × {b[2]:,} env steps"
 
 
+def make_tuned_plans(sweep: SweepFile, space: str, infra, search_dirs=(), origin=None, max_trials: int = 5_000,
+                     registry: Path | None = None) -> list[TunedPlan]:
+    """One tuned comparison per task of the sweep (a table's tasks are tuned one by one: tuned
+    configurations are per task), each named ``NAME`` (one task) or ``NAME-TASK``."""
+    from sweeps.plan import resolve_tasks
+    from sweeps.sweep_file import safe_name
+
+    tasks, _ = resolve_tasks(sweep, search_dirs, origin)
+    if len(tasks) == 1:
+        return [make_tuned_plan(sweep, space, infra, search_dirs, origin, max_trials, registry)]
+    return [make_tuned_plan(sweep.model_copy(update={"task": (t,), "name": safe_name(f"{sweep.name}-{t.split('/')[-1]}")
+                                                      }), space, infra, search_dirs, origin, max_trials, registry)
+            for t in tasks]
+
+
 def make_tuned_plan(sweep: SweepFile, space: str, infra, search_dirs=(), origin=None, max_trials: int = 5_000,
                     registry: Path | None = None) -> TunedPlan:
-    """Every algorithm's search planned (a user's env built once), their budgets checked equal."""
+    """Every algorithm's search on the sweep's task planned (a user's env built once), their budgets
+    checked equal."""
     from sweeps.plan import resolve_tasks
     from sweeps.tuned_registry import DEFAULT_REGISTRY
 
@@ -122,12 +144,14 @@ def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
     fresh seeds after the searches' largest, at the same budget."""
     groups = {}
     for algo, tops in winners.items():
+        own = dict(tp.searches[algo].sweep.set)  # the sweep's set and its groups' (a table's preset)
         for k, w in enumerate(tops, 1):
-            groups[f"{algo}-{TUNED}{k}"] = {"set": {"algo": algo, **w["fields"]}}
-        groups[f"{algo}-{DEFAULT}"] = {"set": {"algo": algo}}
+            groups[f"{algo}-{TUNED}{k}"] = {"set": {**own, "algo": algo, **w["fields"]}}
+        groups[f"{algo}-{DEFAULT}"] = {"set": {**own, "algo": algo}}
     first = next(iter(tp.searches.values()))
     data = tp.sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name",
-                                                            "seeds", "searcher", "num_samples", "description"})
+                                                            "seeds", "searcher", "num_samples", "description", "set"})
+    data["task"] = [tp.task]
     return SweepFile.model_validate({**data, "groups": groups, "name": f"{tp.name}-{CONFIRM}", "searcher": "grid",
                                      "seeds": {"count": tp.sweep.tune.confirm_seeds, "start": max(first.seeds) + 1},
                                      "description": f"confirmation of {tp.name}: each algorithm tuned and default"})

@@ -61,7 +61,7 @@ def test_search_default_names_the_space_and_a_file_may_narrow_it(tmp_path):
 def test_a_tuned_comparison_gives_every_algorithm_the_same_budget(tmp_path, capsys):
     from sweeps.tuned import budget_of, print_tuned_plan
 
-    tp = cli.make_plan(_args(tmp_path, TUNED.replace("[lac, ppo_lag]", "[lac, ppo_lag, sac_lag, trpo_lag]")))
+    tp, = cli.make_plan(_args(tmp_path, TUNED.replace("[lac, ppo_lag]", "[lac, ppo_lag, sac_lag, trpo_lag]")))
     budgets = {a: budget_of(p) for a, p in tp.searches.items()}
     assert set(budgets) == {"lac", "ppo_lag", "sac_lag", "trpo_lag"} and set(budgets.values()) == {(2, 1, 2000)}
     assert all(set(p.sweep.search) == set(search_space(a)) for a, p in tp.searches.items())
@@ -76,8 +76,6 @@ def test_a_tuned_comparison_gives_every_algorithm_the_same_budget(tmp_path, caps
 @pytest.mark.parametrize("text,needle", [
     (TUNED + "search: default\n", "s.yaml:6: search: search with tune"),
     (TUNED + "cost_limits: [0, 2]\n", "cost_limits with tune"),
-    (TUNED.replace("task: lac/PointHazard-v0", "task: [lac/PointHazard-v0, SafetyPointGoal1-v0]"),
-     "a tuned comparison tunes one task"),
     (TUNED.replace("num_samples: 2", "num_samples: 0"), "tune.num_samples: Input should be greater than or equal to 1"),
     (TUNED.replace("num_samples: 2", "samples: 2"), "unknown key 'samples' (did you mean num_samples?)"),
 ])
@@ -85,6 +83,18 @@ def test_bad_tune_sections_are_refused_in_one_line(tmp_path, text, needle):
     with pytest.raises(ValueError) as e:
         cli.make_plan(_args(tmp_path, text))
     assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_the_table_spaces_take_tune_from_the_command_line_one_comparison_per_task(tmp_path):
+    plans = cli.make_plan(cli.parse_args(["--space", "table1", "--budget", "smoke", "--tune", "2", "--tune-seeds",
+                                          "1", "--confirm-seeds", "2", "--tracking-uri",
+                                          f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")]))
+    assert len(plans) == 4 and len({tp.task for tp in plans}) == 4  # the table's four tasks, each tuned apart
+    tp = plans[0]
+    assert set(tp.searches) == {"cpo", "cup", "focops", "ppo_lag", "trpo_lag", "lac"}
+    assert tp.sweep.tune.num_samples == 2 and tp.sweep.tune.confirm_seeds == 2
+    assert tp.searches["cpo"].sweep.set == {"preset": "ssa"}  # each column's preset goes with its algorithm
+    assert {tuple(p.seeds) for p in tp.searches.values()} == {(0,)}
 
 
 def test_confirm_top_beside_tune_is_refused(tmp_path):
@@ -139,7 +149,7 @@ def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_ses
     from sweeps.tuned import run_tuned
     from sweeps.tuned_registry import listing
 
-    tp = cli.make_plan(_args(tmp_path, TUNED))
+    tp, = cli.make_plan(_args(tmp_path, TUNED))
     assert run_tuned(tp, cli.run_locked) == 0
     out = capsys.readouterr().out
     assert "## Tuned comparison" in out and "Ranking on the fresh seeds" in out
