@@ -8,6 +8,7 @@ Kept apart from ``sweeps/sweep.py`` so the CLI can judge a start or a resume bef
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import yaml
@@ -87,3 +88,12 @@ def checked_sweep_dir(plan) -> Path:
     if not resume and started:
         raise ValueError(f"a sweep named {plan.name!r} exists under {plan.storage}; pass --resume or --name")
     return sweep_dir
+
+
+def git_commit() -> str:
+    """The commit of the code that runs the sweep (its parent run's ``git_commit``)."""
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
+                              cwd=Path(__file__).parent).stdout.strip() or "unknown"
+    except OSError:
+        return "unknown"

@@ -272,7 +272,8 @@ def run_locked(plan: Plan, sweep_dir: Path) -> int:
         with sweep_lock(sweep_dir, plan.storage):
             print_plan(plan)
             # Ray is imported here, after the plan is printed: the checks before answer without it.
-            from sweeps.sweep import git_commit, run_sweep
+            from sweeps.record import git_commit
+            from sweeps.sweep import run_sweep
 
             return run_sweep(plan, sweep_dir, git_commit())
     except SweepLocked as e:  # raised on entering the lock, before the plan is printed

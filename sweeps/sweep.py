@@ -8,7 +8,6 @@ import math
 import os
 import platform
 import signal
-import subprocess
 import sys
 import threading
 from pathlib import Path
@@ -101,15 +100,6 @@ class SeedRepeater(Repeater):
         self.searcher.on_trial_complete(group.primary_trial_id, result={
             METRIC: objective(ret, cost, limit), EPISODE_RETURN: ret, EPISODE_COST: cost, CONSTRAINT: cost - limit,
             "n_seeds": len(seeds)})
-
-
-def git_commit() -> str:
-    """The commit of the code that runs the sweep (its parent run's ``git_commit``)."""
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
-                              cwd=Path(__file__).parent).stdout.strip() or "unknown"
-    except OSError:
-        return "unknown"
 
 
 def versions() -> dict:

@@ -592,11 +592,11 @@ class SweepFile(BaseModel):
 # ----------------------------------------------------------------------------- loading
 
 
-class _Loader(yaml.SafeLoader):
+class NumbersLoader(yaml.SafeLoader):
     """YAML 1.1 reads ``1e-4`` as a string (it wants ``1.0e-4``): numbers as people write them."""
 
 
-_Loader.add_implicit_resolver(
+NumbersLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*\.?[0-9_]*|\.[0-9_]+)[eE][-+]?[0-9]+$|^[-+]?[0-9][0-9_]*\.[0-9_]*$"
                r"|^[-+]?\.(?:inf|Inf|INF)$|^\.(?:nan|NaN|NAN)$"),
@@ -621,7 +621,7 @@ def load_with_origin(path: str | Path, text: str | None = None) -> tuple[SweepFi
     """The checked sweep file and where each of its keys is (:class:`Origin`: ``FILE:LINE``)."""
     path = Path(path)
     try:
-        data, node = read_yaml(read_yaml_text(path) if text is None else text, _Loader)
+        data, node = read_yaml(read_yaml_text(path) if text is None else text, NumbersLoader)
     except YamlRefused as e:
         raise SweepFileError(f"{path}{f':{e.line}' if e.line else ''}: {e.message}") from None
     if data is None or data == {}:
@@ -668,13 +668,21 @@ class Origin:
         return f"{where}: {_dotted(loc)}" if loc else where
 
 
+#: How pydantic names a union's branch in an error's location (``dict[str,...]``, ``literal['default']``).
+_BRANCH = re.compile(r"^(dict|list|tuple|union|literal)\[")
+
+
 def first_error(e: ValidationError, origin: Origin) -> str:
     """The first of pydantic's errors as one line: where, the key, what is wrong, the value (cut)
     and what is accepted."""
     errors = e.errors()  # an unknown key first: a typo also explains the required key it misses
+    # A union (``search: default`` or a mapping) fails in every branch: the branch the value was
+    # meant for explains it (a word: the literal's; a mapping: the mapping's).
+    meant = [x for x in errors if not (x["type"] == "literal_error" and not isinstance(x.get("input"), str))]
+    errors = meant or errors
     err = next((x for x in errors if x["type"] == "extra_forbidden"), errors[0])
-    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith(("<", "function-"))
-                                              or p == "[key]"))
+    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and (p.startswith(("<", "function-")) or p == "[key]"
+                                                                      or _BRANCH.match(p))))
     cause = (err.get("ctx") or {}).get("error")
     if isinstance(cause, KeyedError):
         loc = (*loc, *cause.loc)
@@ -770,7 +778,7 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
         for name, dist in ({} if sweep.search == "default" else sweep.search).items():
             if name != ALGO_FIELD and dist != "default":  # a declared range is the field's own
                 for value in dist.values_to_check():
-                    _check_field(name, value, algos, ("search", name, dist.kind))
+                    check_field(name, value, algos, ("search", name, dist.kind))
         return
     groups = [(("grid",), Group(grid=sweep.grid))] if sweep.grid is not None else []
     groups += [(("groups", g), grp) for g, grp in (sweep.groups or {}).items()]
@@ -794,7 +802,7 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
         for name, values in group.grid.items():
             if name != ALGO_FIELD:
                 for i, value in enumerate(values):
-                    _check_field(name, value, algos, (*prefix, name, i))
+                    check_field(name, value, algos, (*prefix, name, i))
 
 
 def _missing_algos_hint(groups: list, search_dirs: tuple[str, ...]) -> str:
@@ -850,10 +858,10 @@ def _check_set(sets: dict, algos: tuple, loc: tuple) -> None:
 
     for name, value in sets.items():
         if name != ALGO_FIELD:
-            _check_field(name, value, algos, (*loc, name))
+            check_field(name, value, algos, (*loc, name))
 
 
-def _check_field(name: str, value: Any, algos: tuple, loc: tuple) -> None:
+def check_field(name: str, value: Any, algos: tuple, loc: tuple) -> None:
     from lac_rllib.algorithms.registry import ALGOS, algo_config
 
     for algo in algos:

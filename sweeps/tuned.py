@@ -20,9 +20,10 @@ from pathlib import Path
 from sweeps import spaces
 from sweeps.plan import Plan, plan_sweep
 from sweeps.record import SWEEP_FILE
+from sweeps.reports.tuned import DEFAULT, TUNED
 from sweeps.sweep_file import SweepFile, check_fields
 
-TUNE, CONFIRM, TUNED, DEFAULT = "tune", "confirm", "tuned", "default"
+TUNE, CONFIRM = "tune", "confirm"
 
 
 @dataclasses.dataclass(frozen=True)

@@ -89,8 +89,7 @@ def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: 
     """Each algorithm's confirmed winner written to ``tp.registry`` (an entry replaced by a newer one)."""
     from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
     from sweeps import spaces
-    from sweeps.record import parent_run_id
-    from sweeps.sweep import git_commit
+    from sweeps.record import git_commit, parent_run_id
 
     written = []
     fresh = tuple(sorted(int(s) for s in trials["seed"].unique()))
@@ -127,10 +126,10 @@ def read_entry(path: Path) -> Entry:
     its algorithm's declaration; a ValueError of one line naming the file and what is wrong."""
     from sweeps.bounded_yaml import YamlRefused, read_text
     from sweeps.bounded_yaml import read as read_yaml
-    from sweeps.sweep_file import FieldError, _check_field, _Loader
+    from sweeps.sweep_file import FieldError, NumbersLoader, check_field
 
     try:
-        data, _ = read_yaml(read_text(path), _Loader)
+        data, _ = read_yaml(read_text(path), NumbersLoader)
         entry = Entry.model_validate(data)
     except YamlRefused as e:
         raise ValueError(f"{path}: {e.message}") from None
@@ -148,7 +147,7 @@ def read_entry(path: Path) -> Entry:
 
         check_algo(entry.algo)
         for name, value in entry.config.items():
-            _check_field(name, value, (entry.algo,), ("config", name))
+            check_field(name, value, (entry.algo,), ("config", name))
     except FieldError as e:
         raise ValueError(f"{path}: {'.'.join(map(str, e.loc))}: {e.message}") from None
     return entry

@@ -9,24 +9,12 @@ from __future__ import annotations
 
 import torch
 
+from lac_rllib.tasks.versions import BF16_FLAGS, cpu_flags
+
 DTYPES = ("float32", "bfloat16")
 #: What a dtype field accepts: a dtype, or "auto" (:func:`resolve_dtype`).
 DTYPE_CHOICES = (*DTYPES, "auto")
 TORCH_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
-#: CPU flags (Linux /proc/cpuinfo) of native bfloat16 matmuls: AVX512-BF16 or AMX.
-BF16_FLAGS = ("avx512_bf16", "amx_bf16")
-
-
-def cpu_flags() -> set[str]:
-    """This CPU's feature flags as Linux reports them (empty where /proc/cpuinfo is not there)."""
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return set()
 
 
 def resolve_dtype(name: str) -> str:

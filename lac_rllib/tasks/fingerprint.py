@@ -16,14 +16,17 @@ import hashlib
 import json
 from typing import Any
 
-from lac_rllib.constrained.precision import BF16_FLAGS, cpu_flags
-from lac_rllib.tasks.versions import runtime_versions
+from lac_rllib.tasks.versions import BF16_FLAGS, cpu_flags, runtime_versions
 
 #: The simulator packages whose versions change trajectories (docs/dependencies.md).
 SIMULATOR_PACKAGES = ("safety_gymnasium", "mujoco", "gymnasium")
 #: The algorithm fields that change what the env hands the learner (the observation filter, the envs).
 #: (The cost limit is not among them: it belongs to a configuration, and a ladder compares limits.)
 ENV_FIELDS = ("obs_normalization", "obs_clip", "obs_std_floor", "episode_cost_discount")
+#: What an algorithm's own configuration decides rather than the task: its reference's observation
+#: filter (RESPO's runs without one), its envs, its kernels. Runs of one algorithm that differ in them
+#: are never ranked together; two algorithms each at their own are (a comparison compares them so).
+ALGORITHM_SIDE = ("envs", "obs_normalization", "obs_clip", "obs_std_floor", "cpu_bf16")
 
 
 def fingerprint(task: str, params: dict, num_env_runners: int = 0) -> dict[str, Any]:
@@ -51,6 +54,11 @@ def fingerprint(task: str, params: dict, num_env_runners: int = 0) -> dict[str, 
 def fingerprint_id(fp: dict) -> str:
     """A short stable id of a fingerprint (equal fingerprints, equal ids)."""
     return hashlib.sha256(json.dumps(fp, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+def environment(fp: dict) -> dict:
+    """The part of a fingerprint every algorithm on the task shares (:data:`ALGORITHM_SIDE` left out)."""
+    return {k: v for k, v in fp.items() if k not in ALGORITHM_SIDE}
 
 
 def differences(a: dict, b: dict) -> str:

@@ -27,6 +27,10 @@ from lac_rllib.constrained.metrics import EPISODE_COST, EPISODE_RETURN, FEASIBLE
 from sweeps.reports.configurations import fmt_num
 from sweeps.reports.stats import CONFIDENCE, REPS, SEED, interval, probability_of_improvement
 
+#: How the confirmation labels its groups: ``ALGO-tuned1`` (the search's best, then the next) and
+#: ``ALGO-default`` (sweeps/tuned.py writes them, this report reads them).
+TUNED, DEFAULT = "tuned", "default"
+
 
 def gap_interval(tuned, default) -> tuple[float, float, float]:
     """(mean(tuned) − mean(default), CI low, CI high): a percentile bootstrap resampling each side's
@@ -94,8 +98,6 @@ def _num(x) -> float:
 def comparison(searched: dict, winners: dict, confirmation: pd.DataFrame) -> dict:
     """Per algorithm: its default and tuned figures on the fresh seeds, the gap and P(improvement),
     the winner's curse, its search's sensitivity; and both rankings."""
-    from sweeps.tuned import DEFAULT, TUNED
-
     per = {}
     for algo, tops in winners.items():
         tuned, default = _scores(confirmation, f"{algo}-{TUNED}1"), _scores(confirmation, f"{algo}-{DEFAULT}")
