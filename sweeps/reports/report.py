@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import matplotlib
@@ -118,7 +119,8 @@ def parent_metrics(summary: pd.DataFrame) -> dict[str, float]:
         best = best_configuration(summary[summary["task"] == task])
         if best is None:
             continue
-        suffix = "" if len(tasks) == 1 else f"/{task}"
+        # MLflow's metric names take letters, digits and _ - . / : and spaces (a split task's ``@``: _).
+        suffix = "" if len(tasks) == 1 else "/" + re.sub(r"[^\w\-./: ]", "_", str(task))
         out[f"best_feasible_return{suffix}"] = float(best["return_mean"])
         out[f"best_feasible_cost{suffix}"] = float(best["cost_mean"])
     return out

@@ -95,21 +95,40 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
 ENV_COLUMN, ENV_JSON_COLUMN = "env_fingerprint", "env_fingerprint_json"
 #: How a task's runs in another environment are labelled: the task, then the fingerprint's id.
 ENV_LABEL = " @env:"
+#: Per trial split apart, the fingerprint (or its shared part) its ``TASK @env:ID`` label stands for.
+ENV_SPLIT_COLUMN = "env_split"
 
 
 def split_environments(trials: pd.DataFrame) -> pd.DataFrame:
     """Runs of one task in different environments (env fingerprints) are never ranked together: where
-    a task's trials carry more than one fingerprint, each is its own task, ``TASK @env:ID``, in every
-    report (summary, frontier, ladder, table, confirmation, the tuned comparison). A trial without a
-    fingerprint (recorded before there was one) stays with the task."""
+    a task's trials carry more than one, each is its own task, ``TASK @env:ID``, in every report
+    (summary, frontier, ladder, table, confirmation, the tuned comparison). Two levels: what every
+    algorithm on the task shares (the simulator, the task's settings, the cost) splits any runs; what
+    an algorithm's own configuration decides (its observation filter, envs, kernels:
+    lac_rllib/tasks/fingerprint.py's ``ALGORITHM_SIDE``) splits the runs of one algorithm only, so a
+    comparison ranks each algorithm at its reference's settings. A trial without a fingerprint
+    (recorded before there was one) stays with the task. ``env_split`` holds, per split trial, the
+    fingerprint its label stands for (read by :func:`environment_note`)."""
+    from lac_rllib.tasks.fingerprint import environment, fingerprint_id
+
     if not len(trials) or ENV_COLUMN not in trials:
         return trials
     trials = trials.copy()
+    trials[ENV_SPLIT_COLUMN] = ""
     for task, g in trials.groupby("task", sort=False):
-        ids = [i for i in dict.fromkeys(g[ENV_COLUMN]) if i]
-        if len(ids) > 1:
-            known = g[ENV_COLUMN].astype(bool)
-            trials.loc[g.index[known], "task"] = [f"{task}{ENV_LABEL}{i}" for i in g.loc[known, ENV_COLUMN]]
+        fps = {i: json.loads(j) if j else None for i, j in zip(g.index, g.get(ENV_JSON_COLUMN, [""] * len(g)))}
+        known = [i for i in g.index if trials.at[i, ENV_COLUMN]]
+        shared = {i: environment(fps[i]) if fps[i] else {"id": trials.at[i, ENV_COLUMN]} for i in known}
+        if len({fingerprint_id(shared[i]) for i in known}) > 1:
+            for i in known:
+                trials.at[i, "task"] = f"{task}{ENV_LABEL}{fingerprint_id(shared[i])}"
+                trials.at[i, ENV_SPLIT_COLUMN] = json.dumps(shared[i])
+        by = ["task", "algo"] if "algo" in trials else ["task"]
+        for _, a in trials.loc[known].groupby(by, sort=False):
+            if a[ENV_COLUMN].nunique() > 1:
+                for i in a.index:
+                    trials.at[i, "task"] = f"{task}{ENV_LABEL}{trials.at[i, ENV_COLUMN]}"
+                    trials.at[i, ENV_SPLIT_COLUMN] = json.dumps(fps[i] or {"id": trials.at[i, ENV_COLUMN]})
     return trials
 
 
@@ -117,12 +136,12 @@ def environment_note(trials: pd.DataFrame) -> str:
     """One line per task split by :func:`split_environments`, naming what differs between its environments."""
     from lac_rllib.tasks.fingerprint import differences
 
-    if not len(trials) or ENV_COLUMN not in trials:
+    if not len(trials) or ENV_SPLIT_COLUMN not in trials:
         return ""
-    split = trials[trials["task"].astype(str).str.contains(ENV_LABEL, regex=False)]
+    split = trials[trials[ENV_SPLIT_COLUMN].astype(bool)]
     lines = []
     for task, g in split.groupby(split["task"].astype(str).str.split(ENV_LABEL).str[0], sort=False):
-        fps = {i: json.loads(j) for i, j in zip(g[ENV_COLUMN], g[ENV_JSON_COLUMN]) if j}
+        fps = {label.split(ENV_LABEL)[-1]: json.loads(j) for label, j in zip(g["task"], g[ENV_SPLIT_COLUMN])}
         ids = list(fps)
         diff = "; ".join(f"{a} vs {b}: {differences(fps[a], fps[b])}" for a, b in zip(ids, ids[1:]))
         lines.append(f"**Not ranked together**: `{task}` ran in {len(ids)} environments ({', '.join(ids)}), "

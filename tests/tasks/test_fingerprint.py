@@ -32,11 +32,13 @@ def test_the_fingerprint_reads_the_envs_the_filter_the_simulator_and_the_cpu_whe
                                                                          f"{base['mujoco']} vs 0.1"
 
 
-def _trials(versions):
+def _trials(versions, algos=None, fps=None):
     rows = []
     for i, mujoco in enumerate(versions):
-        fp = {**_fp(), "mujoco": mujoco}
-        rows.append({"group": "g", "param": "", "value": None, "task": "lac/PointHazard-v0", "config": "c",
+        fp = {**(fps[i] if fps else _fp()), "mujoco": mujoco}
+        algo = algos[i] if algos else "lac"
+        rows.append({"group": algo, "param": "", "value": None, "task": "lac/PointHazard-v0", "config": algo,
+                     "algo": algo,
                      "seed": i, "default": True, "status": "TERMINATED", "episode_return": float(i),
                      "episode_cost": 0.0, "cost_limit": 2.0, "feasible": 1.0, "objective": float(i), "score": "train",
                      ENV_COLUMN: fpm.fingerprint_id(fp), ENV_JSON_COLUMN: json.dumps(fp)})
@@ -52,6 +54,20 @@ def test_trials_of_two_simulator_versions_are_split_with_a_note_naming_the_diffe
     assert "`lac/PointHazard-v0` ran in 2 environments" in note and "mujoco 3.3.0 vs 3.2.7" in note, note
     one = split_environments(_trials(["3.3.0", "3.3.0"]))
     assert set(one["task"]) == {"lac/PointHazard-v0"} and environment_note(one) == ""
+
+
+def test_each_algorithm_at_its_own_filter_is_ranked_with_the_others_but_one_algorithm_in_two_is_split():
+    """RESPO's reference runs without the observation filter: a comparison still ranks it beside LAC.
+    Two runs of one algorithm that differ in their envs are split, with the note naming the envs."""
+    lac, respo = _fp(), _fp(algo="respo", obs_normalization=False)
+    together = split_environments(_trials(["3.3.0"] * 2, ["lac", "respo"], [lac, respo]))
+    assert set(together["task"]) == {"lac/PointHazard-v0"} and environment_note(together) == ""
+    assert len(summarize(together)) == 2
+    two = _fp(num_envs_per_env_runner=2)
+    split = split_environments(_trials(["3.3.0"] * 3, ["lac", "lac", "respo"], [lac, two, respo]))
+    assert split["task"].nunique() == 3 and "@env:" in split["task"].iloc[0], split["task"].tolist()
+    note = environment_note(split)
+    assert "envs 1 vs 2" in note and "obs_normalization" not in note, note
 
 
 def test_a_resume_under_a_changed_environment_is_refused(tmp_path, monkeypatch):
