@@ -200,6 +200,10 @@ def test_preset_tuned_reads_a_good_entry(tmp_path):
     # The sweep's own set wins over the entry (the entry sits where the defaults were).
     plan = cli.make_plan(_args(tmp_path, PRESET + "set: {lr: 0.004}\n", "--name", "x2"))
     assert plan.trials[0].params["lr"] == 0.004 and plan.trials[0].params["clip_param"] == 0.25
+    from sweeps.tuned_registry import listing
+
+    assert "lac/PointHazard-v0 ppo_lag @ smoke (limit 2): clip_param=0.25, lr=0.002" in listing(tmp_path / "registry")
+    assert cli.main(["registry", str(tmp_path / "registry")]) == 0
 
 
 def test_an_entry_of_another_environment_is_refused_naming_the_difference(tmp_path):

@@ -84,7 +84,7 @@ class CPOConfig(TrustRegionConfig):
     PARAMS, FIELDS, PRESETS = CPOParams, fields.FieldSet(CPOParams, "CPO"), PRESETS
     SEARCH_SPACE = {
         "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
-        "cg_damping": lr("docs/baselines-audit: the damping convention differs act_dim× between references"),
+        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
         "critic_lr": lr("[O] the critics' lr (CPO's cost critic sets its recovery steps)"),
     }
     REPORTED_KEYS = (*TRUST_REGION_KEYS, metrics.COST_GAP, metrics.CPO_CASE)

@@ -63,7 +63,7 @@ class PCPOConfig(CPOConfig):
     PARAMS, FIELDS, PRESETS = PCPOParams, fields.FieldSet(PCPOParams, "PCPO"), PRESETS
     SEARCH_SPACE = {
         "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
-        "cg_damping": lr("docs/baselines-audit: the damping convention differs act_dim× between references"),
+        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
         "critic_lr": lr("[O] the critics' lr (PCPO's cost critic sets its projection)"),
     }
     REPORTED_KEYS = tuple(k for k in CPOConfig.REPORTED_KEYS if k != metrics.CPO_CASE)  # no cases

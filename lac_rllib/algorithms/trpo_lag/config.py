@@ -50,7 +50,7 @@ class TRPOLagConfig(TrustRegionConfig):
     PARAMS, FIELDS, PRESETS = TRPOLagParams, fields.FieldSet(TRPOLagParams, "TRPO-Lag"), PRESETS
     SEARCH_SPACE = {
         "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
-        "cg_damping": lr("docs/baselines-audit: the damping convention differs act_dim× between references"),
+        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
         "lagrangian_lr": lr(MULTIPLIER_LR),
         "critic_lr": lr("[O] the critics' lr, 1e-3 everywhere: a decade either side"),
     }
