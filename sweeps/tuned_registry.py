@@ -61,6 +61,9 @@ class Entry(BaseModel):
     """The algorithm's default on the same fresh seeds."""
     search: dict[str, Any]
     """Its figures on the search's seeds (the winner's curse is their difference to ``fresh``)."""
+    search_feasible: bool = True
+    """Whether its search had a configuration feasible on average; where not, this one is the least
+    costly (sweeps/tuned.py ``pick_winners``), written so that ``preset: tuned`` is not read as a safe choice."""
     mlflow: dict[str, str]
     """The tracking URI and the parent runs: the search's and the confirmation's."""
     commit: str
@@ -102,6 +105,7 @@ def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: 
                       cost_limit=v["tuned"]["limit"], config=json.loads(json.dumps(fields, default=str)),
                       search_seeds=plan.seeds, fresh_seeds=fresh, fresh=_scores(v["tuned"]),
                       default_fresh=_scores(v["default"]), search=winners[algo][0]["search"],
+                      search_feasible=winners[algo][0]["feasible"],
                       mlflow={"tracking_uri": plan.tracking_uri,
                               "search_run": parent_run_id(Path(plan.storage) / plan.name),
                               "confirmation_run": confirm_parent},
@@ -196,5 +200,6 @@ def listing(registry: Path) -> str:
         lines.append(f"  {e.task} {e.algo} @ {e.budget} (limit {e.cost_limit:g}): "
                      f"{', '.join(f'{k}={v}' for k, v in e.config.items())}; fresh seeds {len(e.fresh_seeds)}: "
                      f"return {f.return_mean:.3g}, cost {f.cost_mean:.3g} (default {e.default_fresh.return_mean:.3g}, "
-                     f"{e.default_fresh.cost_mean:.3g}); env {e.fingerprint_id}")
+                     f"{e.default_fresh.cost_mean:.3g}); env {e.fingerprint_id}"
+                     + ("" if e.search_feasible else "; its search had nothing feasible: the least costly"))
     return "\n".join(lines)

@@ -158,6 +158,7 @@ def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_ses
         entry = yaml.safe_load((registry / "lac/PointHazard-v0" / f"{algo}.yaml").read_text())
         assert entry["fresh_seeds"] == [1, 2] and entry["search_seeds"] == [0] and entry["fresh"]["n_seeds"] == 2
         assert set(entry["config"]) == set(search_space(algo)) and entry["mlflow"]["confirmation_run"]
+        assert isinstance(entry["search_feasible"], bool)
     # preset: tuned runs each entry: the trial's params are the entry's configuration.
     plan = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
                                "--name", "from-registry"))
@@ -203,7 +204,10 @@ def test_preset_tuned_reads_a_good_entry(tmp_path):
     from sweeps.tuned_registry import listing
 
     assert "lac/PointHazard-v0 ppo_lag @ smoke (limit 2): clip_param=0.25, lr=0.002" in listing(tmp_path / "registry")
+    assert "nothing feasible" not in listing(tmp_path / "registry")
     assert cli.main(["registry", str(tmp_path / "registry")]) == 0
+    _entry(tmp_path, search_feasible=False)  # a search without a feasible configuration: said beside it
+    assert "its search had nothing feasible: the least costly" in listing(tmp_path / "registry")
 
 
 def test_an_entry_of_another_environment_is_refused_naming_the_difference(tmp_path):
