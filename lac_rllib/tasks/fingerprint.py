@@ -22,11 +22,12 @@ from lac_rllib.tasks.versions import BF16_FLAGS, cpu_flags, runtime_versions
 SIMULATOR_PACKAGES = ("safety_gymnasium", "mujoco", "gymnasium")
 #: The algorithm fields that change what the env hands the learner (the observation filter, the envs).
 #: (The cost limit is not among them: it belongs to a configuration, and a ladder compares limits.)
-ENV_FIELDS = ("obs_normalization", "obs_clip", "obs_std_floor", "episode_cost_discount")
+OBS_FILTER = ("obs_normalization", "obs_clip", "obs_std_floor")  # the observation filter's fields
+ENV_FIELDS = (*OBS_FILTER, "episode_cost_discount")
 #: What an algorithm's own configuration decides rather than the task: its reference's observation
 #: filter (RESPO's runs without one), its envs, its kernels. Runs of one algorithm that differ in them
 #: are never ranked together; two algorithms each at their own are (a comparison compares them so).
-ALGORITHM_SIDE = ("envs", "obs_normalization", "obs_clip", "obs_std_floor", "cpu_bf16")
+ALGORITHM_SIDE = ("envs", *OBS_FILTER, "cpu_bf16")
 
 
 def fingerprint(task: str, params: dict, num_env_runners: int = 0) -> dict[str, Any]:

@@ -6,6 +6,8 @@ frontier, chain_health, confirm) imports these from here, none from another repo
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 
@@ -34,6 +36,12 @@ def fmt_value(v) -> str:
     if is_na(v):
         return "–"
     return str(int(v)) if isinstance(v, (float, np.floating)) and float(v).is_integer() else str(v)
+
+
+def metric_name(text: str) -> str:
+    """``text`` (a task, a configuration) as a part of an MLflow metric's name: MLflow refuses a name
+    with other characters than letters, digits and ``_ - . /`` and spaces (a split task's ``@``)."""
+    return re.sub(r"[^\w\-./ ]", "_", str(text))
 
 
 def fmt_num(x) -> str:

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN
-from sweeps.reports.configurations import fmt_num, fmt_value, is_na, prepared
+from sweeps.reports.configurations import fmt_num, fmt_value, is_na, metric_name, prepared
 from sweeps.reports.safety import wilson_interval
 from sweeps.reports.stats import interval
 
@@ -238,13 +238,11 @@ def applies(trials: pd.DataFrame) -> bool:
 def parent_metrics(table: pd.DataFrame) -> dict[str, float]:
     """What the parent run carries per configuration: its wins over the ladder and its worst regret
     (MLflow's runs table sorts sweeps by them); the task leads the name where there are several."""
-    import re
-
     w = wins(table)
     several = w["task"].nunique() > 1
     out = {}
     for r in w.itertuples():
-        name = re.sub(r"[^\w\-./ ]", "_", f"{r.task}/{r.configuration}" if several else r.configuration)
+        name = metric_name(f"{r.task}/{r.configuration}" if several else r.configuration)
         out[f"ladder_wins/{name}"] = float(r.wins)
         if math.isfinite(r.worst_regret):
             out[f"ladder_worst_regret/{name}"] = float(r.worst_regret)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from pathlib import Path
 
 import matplotlib
@@ -35,6 +34,7 @@ from sweeps.reports.configurations import ci as _ci  # noqa: E402
 from sweeps.reports.configurations import fmt_num as _fmt_num  # noqa: E402
 from sweeps.reports.configurations import fmt_value as _fmt_value  # noqa: E402
 from sweeps.reports.configurations import is_na as _is_na  # noqa: E402
+from sweeps.reports.configurations import metric_name as _metric_name  # noqa: E402
 from sweeps.reports.configurations import prepared as _prepared  # noqa: E402
 from sweeps.reports.configurations import value_key as _value_key  # noqa: E402
 from sweeps.reports.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
@@ -119,8 +119,7 @@ def parent_metrics(summary: pd.DataFrame) -> dict[str, float]:
         best = best_configuration(summary[summary["task"] == task])
         if best is None:
             continue
-        # MLflow's metric names take letters, digits and _ - . / : and spaces (a split task's ``@``: _).
-        suffix = "" if len(tasks) == 1 else "/" + re.sub(r"[^\w\-./: ]", "_", str(task))
+        suffix = "" if len(tasks) == 1 else f"/{_metric_name(task)}"
         out[f"best_feasible_return{suffix}"] = float(best["return_mean"])
         out[f"best_feasible_cost{suffix}"] = float(best["cost_mean"])
     return out

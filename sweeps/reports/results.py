@@ -115,6 +115,7 @@ def split_environments(trials: pd.DataFrame) -> pd.DataFrame:
         return trials
     trials = trials.copy()
     trials[ENV_SPLIT_COLUMN] = ""
+    by = ["task", "algo"] if "algo" in trials else ["task"]
     for task, g in trials.groupby("task", sort=False):
         fps = {i: json.loads(j) if j else None for i, j in zip(g.index, g.get(ENV_JSON_COLUMN, [""] * len(g)))}
         known = [i for i in g.index if trials.at[i, ENV_COLUMN]]
@@ -123,7 +124,6 @@ def split_environments(trials: pd.DataFrame) -> pd.DataFrame:
             for i in known:
                 trials.at[i, "task"] = f"{task}{ENV_LABEL}{fingerprint_id(shared[i])}"
                 trials.at[i, ENV_SPLIT_COLUMN] = json.dumps(shared[i])
-        by = ["task", "algo"] if "algo" in trials else ["task"]
         for _, a in trials.loc[known].groupby(by, sort=False):
             if a[ENV_COLUMN].nunique() > 1:
                 for i in a.index:
