@@ -139,6 +139,11 @@ def environment_note(trials: pd.DataFrame) -> str:
     if not len(trials) or ENV_SPLIT_COLUMN not in trials:
         return ""
     split = trials[trials[ENV_SPLIT_COLUMN].astype(bool)]
+    # The default configuration's environment first, then by trial id: the note reads "default vs
+    # changed" and does not follow the order the trials happened to finish in (MLflow's run order).
+    keys = [c for c in ("default", "trial_id") if c in split]
+    if keys:
+        split = split.sort_values(keys, ascending=[c != "default" for c in keys], kind="stable")
     lines = []
     for task, g in split.groupby(split["task"].astype(str).str.split(ENV_LABEL).str[0], sort=False):
         fps = {label.split(ENV_LABEL)[-1]: json.loads(j) for label, j in zip(g["task"], g[ENV_SPLIT_COLUMN])}

@@ -70,6 +70,15 @@ def test_each_algorithm_at_its_own_filter_is_ranked_with_the_others_but_one_algo
     assert "envs 1 vs 2" in note and "obs_normalization" not in note, note
 
 
+def test_the_note_names_the_default_environment_first_whatever_order_the_trials_finished_in():
+    """MLflow lists child runs in the order they ran: the note must not follow it."""
+    rows = _trials(["3.3.0"] * 2, fps=[_fp(), _fp(num_envs_per_env_runner=2)])
+    rows["default"], rows["trial_id"] = [True, False], ["lac-envs=1-s0", "lac-envs=2-s0"]
+    for order in (rows, rows.iloc[::-1]):
+        note = environment_note(split_environments(order.reset_index(drop=True)))
+        assert "envs 1 vs 2" in note, note
+
+
 def test_a_resume_under_a_changed_environment_is_refused(tmp_path, monkeypatch):
     from sweeps.record import checked_sweep_dir, write_record
 
