@@ -76,7 +76,9 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
                for c in (TRAIN_RETURN, TRAIN_COST, EVAL_RETURN, EVAL_COST)},
             **seed_statistics(ret, cost, *(pd.to_numeric(base[c], errors="coerce") for c in
                                            (EPISODE_RETURN, EPISODE_COST)) if len(base) else (None, None))))
-    rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"]))
+    # A total order (a ladder's limits, then the label): the report never follows MLflow's run order.
+    rows.sort(key=lambda r: (str(r["group"]), _value_key(r["value"]), str(r["task"]), r["param"],
+                             _value_key(r["cost_limit"]), str(r["config"])))
     return pd.DataFrame(rows, columns=KEYS + STATS)
 
 

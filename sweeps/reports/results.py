@@ -88,6 +88,9 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
         # The score the trial was ranked on when it ended (its tag); a run from before the tag: train.
         rows[-1] = scored(rows[-1], curves[tid], m, run.data.tags.get(SCORE_TAG, TRAIN))
+    # By trial id, not in the order MLflow lists the runs (the order they ran): a report is a function
+    # of what was recorded, the same for any finish order.
+    rows.sort(key=lambda r: str(r["trial_id"]))
     return split_environments(pd.DataFrame(rows)), curves
 
 

@@ -82,6 +82,17 @@ def test_summarize_statistics_and_order():
     assert not bool(s[s["value"] == 20].iloc[0]["mean_feasible"])
 
 
+def test_a_ladders_rows_go_by_limit_whatever_order_the_trials_came_in():
+    """MLflow lists child runs in the order they ran; the summary must not follow it."""
+    ladder = pd.concat([hand_table(limit).assign(config=lambda d, b=limit: d["value"].astype(str) + f"-b{b:g}")
+                        for limit in (25.0, 5.0)], ignore_index=True)
+    s = report.summarize(ladder)
+    vt10 = s[(s["group"] == "VT") & (s["value"] == 10)]
+    assert list(vt10["cost_limit"]) == [5.0, 25.0] and list(vt10["config"]) == ["10-b5", "10-b25"]
+    shuffled = ladder.sample(frac=1.0, random_state=0).reset_index(drop=True)
+    pd.testing.assert_frame_equal(report.summarize(shuffled), s)
+
+
 def test_best_configuration_prefers_feasible_and_none_when_infeasible():
     best = report.best_configuration(report.summarize(hand_table()))
     assert (best["group"], best["value"], best["return_mean"]) == ("VT", 30, 20.0)
