@@ -50,6 +50,8 @@ NOTE_TAG = "mlflow.note.content"  # a run's description, rendered as markdown on
 EXPERIMENT_KIND_TAG, MODEL_TRAINING_KIND = "mlflow.experimentKind", "custom_model_development"
 DEFAULT_UI = "http://127.0.0.1:5000"  # where `mlflow ui` serves a local store
 GAP_TAG, GAP_SECONDS_TAG = "lac.tracking_gap_retries", "lac.tracking_gap_s"
+#: The words of the line a trial's log gets for each iteration whose metrics wait for the server.
+BUFFERED = "buffered while the server is away:"
 RETRY_S = float(os.environ.get("LAC_TRACKING_RETRY_S", "120"))  # how long a call waits for the server
 
 
@@ -262,7 +264,9 @@ class TrialTracker:
     def log_metrics(self, metrics: dict, step: int) -> None:
         now = int(time.time() * 1000)
         self._pending += [Metric(k, float(v), now, int(step)) for k, v in metrics.items()]
-        self.flush()
+        if not self.flush():  # one line per iteration in the trial's log: training goes on meanwhile
+            print(f"[lac tracking] {BUFFERED} step {step}: {len(self._pending)} metrics wait for {self.uri}",
+                  file=sys.stderr, flush=True)
 
     def set_tags(self, tags: dict) -> None:
         self._tags.update({k: str(v) for k, v in tags.items()})

@@ -48,3 +48,25 @@ def test_the_learning_curve_carries_nu_its_bound_and_the_cost_rate_by_step():
     curve = learning_curve(client, "run", 5.0)
     assert curve["nu"].tolist() == [0.0, 0.5] and curve["cost_rate"].tolist() == [0.009, 0.0065]
     assert curve["nu_max"].isna().all() and curve["cost_limit"].tolist() == [5.0, 5.0]
+
+
+def test_metrics_wait_while_the_server_is_away_and_arrive_with_the_gap_tagged(tmp_path, capsys, monkeypatch):
+    """Each iteration logged during an outage says so in the trial's log (one line, with its step)
+    and is delivered, stamped when it was logged, with the next call that reaches the server."""
+    from sweeps.tracking import BUFFERED, GAP_TAG
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    tracker = TrialTracker(uri, "exp", None, "t-0001", "x")
+    run_id = tracker.open({"seed": 0}, {})
+    real = tracker._raw.log_batch
+    monkeypatch.setattr(tracker._raw, "log_batch", lambda *a, **k: (_ for _ in ()).throw(ConnectionError("away")))
+    tracker.log_metrics({"env_steps": 500.0}, step=500)
+    tracker.log_metrics({"env_steps": 1000.0}, step=1000)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if BUFFERED in ln]
+    assert [ln.split(BUFFERED)[1].split(":")[0].strip() for ln in lines] == ["step 500", "step 1000"], lines
+    monkeypatch.setattr(tracker._raw, "log_batch", real)
+    tracker.log_metrics({"env_steps": 1500.0}, step=1500)
+    assert BUFFERED not in capsys.readouterr().err
+    client = MlflowClient(uri)
+    assert [m.step for m in client.get_metric_history(run_id, "env_steps")] == [500, 1000, 1500]
+    assert client.get_run(run_id).data.tags[GAP_TAG] == "2"
