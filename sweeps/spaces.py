@@ -51,7 +51,7 @@ class Budget:
 BUDGETS: dict[str, Budget] = {
     "smoke": Budget({"*": 2_000}, "seconds per trial: proves the machinery, learns nothing", "smoke"),
     "quick": Budget({"tiny": QUICK_TINY_STEPS, "*": 16_000},
-                    "the default ablation learns lac/PointHazard-v0 in ~30 min on 2 cores; on the paper's tasks "
+                    "the default ablation learns lac/PointHazard-v0 in 11-15 min on 2 cores; on the paper's tasks "
                     "a machinery check that learns nothing", "quick"),
     "paper": Budget({"*": 2_500_000}, "the paper's 2.5M env steps with the docs/spec.md §5 presets", "paper"),
 }

@@ -30,9 +30,16 @@ def test_the_default_ablation_is_what_the_readme_says(tmp_path, monkeypatch):
     assert [(t.params["nu_lr"], t.params["nu_init"]) for t in unconstrained] == [(0.0, 0.0)] * 3
     defaults = [t.label() for t in plan.trials if t.default]
     assert defaults == [f"VT-langevin_steps=20-PointHazard-v0-s{s}" for s in range(3)]
-    minutes = int(re.search(r"(\d+) trials, ~(\d+) min on 2 cores", FIRST_SCREEN).group(2))
+    # The first screen gives the measured range; the paragraph below it every measurement and the
+    # plan's uncalibrated estimate (the tests run uncalibrated: conftest.py), which must be the plan's.
+    lo, hi = map(float, re.search(r"\d+ trials, (\d+)-(\d+) min on 2 cores as measured", FIRST_SCREEN).groups())
     assert f"{plan.task}, {plan.n_trials} trials" in FIRST_SCREEN
-    assert plan.estimated_wall_s / 60 <= minutes <= 35, (plan.estimated_wall_s / 60, minutes)
+    measured_text = re.search(r"Measured on .*?the report:", FIRST_SCREEN, re.S).group(0)
+    measured = [float(m) for m in re.findall(r"(\d+(?:\.\d+)?) min (?:wall|on)", measured_text)]
+    assert len(measured) >= 3 and all(lo <= m <= hi for m in measured), (lo, hi, measured)
+    uncalibrated = float(re.search(r"~(\d+) min uncalibrated", measured_text).group(1))
+    assert uncalibrated == pytest.approx(plan.estimated_wall_s / 60, rel=0.1), plan.estimated_wall_s / 60
+    assert hi <= 35
     assert "quick" in FIRST_SCREEN and "--space ablation" in FIRST_SCREEN
 
 
