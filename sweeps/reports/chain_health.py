@@ -54,8 +54,8 @@ def chain_flags(final_metrics: pd.DataFrame) -> pd.Series:
     the configurations in order of appearance); each metric is the mean over the configuration's
     trials that have it. A missing metric column counts as NaN."""
     df = final_metrics.copy()
-    df["param"] = df["param"].fillna("").astype(str)
-    df["config"] = df["config"].fillna("").astype(str) if "config" in df else ""
+    df["param"] = df["param"].astype(object).fillna("").astype(str)
+    df["config"] = df["config"].astype(object).fillna("").astype(str) if "config" in df else ""
     for col in HEALTH_COLUMNS:
         df[col] = pd.to_numeric(df[col], errors="coerce") if col in df else float("nan")
     means = df.groupby(KEYS, dropna=False, sort=False)[list(HEALTH_COLUMNS)].mean()

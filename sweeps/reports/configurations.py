@@ -51,10 +51,10 @@ def fmt_num(x) -> str:
 def prepared(trials: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
     """Copy of ``trials`` with a clean ``param`` column, and the boolean mask of failed trials."""
     df = trials.copy()
-    df["param"] = df["param"].fillna("").astype(str)
+    df["param"] = df["param"].astype(object).fillna("").astype(str)
     # "config": the configuration without its seed (lac.config; a search's samples share group,
     # param and value); "default": the trial runs LAC's defaults, the baseline of the comparisons.
-    df["config"] = df["config"].fillna("").astype(str) if "config" in df else ""
+    df["config"] = df["config"].astype(object).fillna("").astype(str) if "config" in df else ""
     df["default"] = df["default"].fillna(False).astype(bool) if "default" in df else False
     failed = df["status"].astype(str).eq("ERROR")
     for col in (EPISODE_RETURN, EPISODE_COST):

@@ -44,7 +44,7 @@ def _scored(trials: pd.DataFrame) -> pd.DataFrame:
     df = df[~failed & ~df["status"].astype(str).eq("STOPPED")].copy()
     for col in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT):
         df[col] = pd.to_numeric(df[col], errors="coerce")
-    df["algo"] = df["algo"].fillna("").astype(str) if "algo" in df else ""
+    df["algo"] = df["algo"].astype(object).fillna("").astype(str) if "algo" in df else ""
     df["value"] = df["value"].map(lambda v: "" if is_na(v) else fmt_value(v))
     return df
 

@@ -113,7 +113,7 @@ def test_a_ladder_sweep_confirms_its_least_mean_regret_configuration_at_every_li
     search = next(p for n, p in parents.items() if not n.endswith("-confirm"))
     confirmation = next(p for n, p in parents.items() if n.endswith("-confirm"))
     table = pd.read_csv(client.download_artifacts(search.info.run_id, "summary/ladder.csv", str(tmp_path)))
-    table[["param", "value"]] = table[["param", "value"]].fillna("")  # the CSV's empty cells
+    table[["param", "value"]] = table[["param", "value"]].astype(object).fillna("")  # the CSV's empty cells
     best = ladder.wins(table).sort_values("mean_regret").iloc[0]["configuration"]  # e.g. "ppo_lag ladder"
     confirmed = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == confirmation.info.run_id]
     top1 = [c for c in confirmed if c.data.params["group"] == "top1"]
