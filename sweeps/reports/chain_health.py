@@ -27,7 +27,7 @@ from __future__ import annotations
 import pandas as pd
 
 from lac_rllib.constrained.metrics import ACTOR_STD_MEAN, LANGEVIN_AT_BOUND, LANGEVIN_CLIP_FRACTION
-from sweeps.reports.configurations import KEYS
+from sweeps.reports.configurations import KEYS, text_column
 
 AT_BOUND_MAX = 0.10  # mean fraction of chain end points on an action bound above which it is flagged
 CLIP_EVERY_STEP = 0.99  # mean clip fraction from which "the clip binds every step"
@@ -54,8 +54,8 @@ def chain_flags(final_metrics: pd.DataFrame) -> pd.Series:
     the configurations in order of appearance); each metric is the mean over the configuration's
     trials that have it. A missing metric column counts as NaN."""
     df = final_metrics.copy()
-    df["param"] = df["param"].astype(object).fillna("").astype(str)
-    df["config"] = df["config"].astype(object).fillna("").astype(str) if "config" in df else ""
+    df["param"] = text_column(df, "param")
+    df["config"] = text_column(df, "config")
     for col in HEALTH_COLUMNS:
         df[col] = pd.to_numeric(df[col], errors="coerce") if col in df else float("nan")
     means = df.groupby(KEYS, dropna=False, sort=False)[list(HEALTH_COLUMNS)].mean()

@@ -21,6 +21,12 @@ def is_na(v) -> bool:
     return v is None or (pd.api.types.is_scalar(v) and bool(pd.isna(v)))
 
 
+def text_column(df: pd.DataFrame, col: str) -> pd.Series | str:
+    """``df[col]`` as text, a missing cell as "" ("" for a missing column). Cast to object first:
+    a column with no value at all is float NaN, and pandas 3 refuses filling one with a string."""
+    return df[col].astype(object).fillna("").astype(str) if col in df else ""
+
+
 def value_key(v) -> tuple:
     """Sort key: numeric values first (numerically), then strings, then missing."""
     if is_na(v):
@@ -51,10 +57,10 @@ def fmt_num(x) -> str:
 def prepared(trials: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
     """Copy of ``trials`` with a clean ``param`` column, and the boolean mask of failed trials."""
     df = trials.copy()
-    df["param"] = df["param"].astype(object).fillna("").astype(str)
+    df["param"] = text_column(df, "param")
     # "config": the configuration without its seed (lac.config; a search's samples share group,
     # param and value); "default": the trial runs LAC's defaults, the baseline of the comparisons.
-    df["config"] = df["config"].astype(object).fillna("").astype(str) if "config" in df else ""
+    df["config"] = text_column(df, "config")
     df["default"] = df["default"].fillna(False).astype(bool) if "default" in df else False
     failed = df["status"].astype(str).eq("ERROR")
     for col in (EPISODE_RETURN, EPISODE_COST):

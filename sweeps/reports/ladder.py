@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN
-from sweeps.reports.configurations import fmt_num, fmt_value, is_na, metric_name, prepared
+from sweeps.reports.configurations import fmt_num, fmt_value, is_na, metric_name, prepared, text_column
 from sweeps.reports.safety import wilson_interval
 from sweeps.reports.stats import interval
 
@@ -44,7 +44,7 @@ def _scored(trials: pd.DataFrame) -> pd.DataFrame:
     df = df[~failed & ~df["status"].astype(str).eq("STOPPED")].copy()
     for col in (EPISODE_RETURN, EPISODE_COST, COST_LIMIT):
         df[col] = pd.to_numeric(df[col], errors="coerce")
-    df["algo"] = df["algo"].astype(object).fillna("").astype(str) if "algo" in df else ""
+    df["algo"] = text_column(df, "algo")
     df["value"] = df["value"].map(lambda v: "" if is_na(v) else fmt_value(v))
     return df
 
