@@ -149,3 +149,16 @@ def test_importance_plots_leave_matplotlib_style_alone(tmp_path):
     before = dict(matplotlib.rcParams)
     importance.importance_plots(grid(), ["langevin_steps", "beta"], tmp_path)
     assert dict(matplotlib.rcParams) == before  # optuna's ggplot would otherwise grey every later report plot
+
+
+@pytest.mark.parametrize("make,fields", [(grid, ["langevin_steps", "beta"]),
+                                         (search, ["langevin_step_size", "langevin_start", "temperature"])])
+def test_the_importances_do_not_follow_the_order_the_trials_are_listed_in(make, fields):
+    """MLflow lists a sweep's runs in the order they finished; the forest (seeded) must see the
+    configurations in one order whatever it was, or the same sweep gets different importances."""
+    trials = make()
+    listed = importance.importances(trials, fields)
+    for seed in (1, 2):
+        shuffled = importance.importances(trials.sample(frac=1, random_state=seed), fields)
+        assert shuffled == listed, (seed, listed, shuffled)
+    assert importance.importances(trials.iloc[::-1], fields) == listed
