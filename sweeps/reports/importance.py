@@ -133,9 +133,9 @@ def _configurations(trials: pd.DataFrame, fields: list[str], column: str) -> tup
     conf = conf[conf[OBJECTIVE].notna()]
     # One order whatever the trials' (MLflow lists runs as they finished): the seeded forest's fit
     # depends on the order of its rows, so the same sweep would get different importances.
-    if len(conf):
-        order = conf[[TASK, CONFIG, *fields]].astype(str).agg("\x1f".join, axis=1)
-        conf = conf.loc[order.sort_values(kind="stable").index].reset_index(drop=True)
+    keys = conf[[TASK, CONFIG, *fields]].to_dict("records")  # str() of each: a missing field is nan or None
+    conf = conf.iloc[sorted(range(len(conf)), key=lambda i: [str(v) for v in keys[i].values()])]
+    conf = conf.reset_index(drop=True)
     if conf[TASK].nunique() > 1:
         by_task = conf.groupby(TASK)[OBJECTIVE]
         std = by_task.transform(lambda s: s.std(ddof=0))

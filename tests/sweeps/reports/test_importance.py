@@ -153,10 +153,14 @@ def test_importance_plots_leave_matplotlib_style_alone(tmp_path):
 
 @pytest.mark.parametrize("make,fields", [(grid, ["langevin_steps", "beta"]),
                                          (search, ["langevin_step_size", "langevin_start", "temperature"])])
-def test_the_importances_do_not_follow_the_order_the_trials_are_listed_in(make, fields):
+@pytest.mark.parametrize("missing", [False, True])
+def test_the_importances_do_not_follow_the_order_the_trials_are_listed_in(make, fields, missing):
     """MLflow lists a sweep's runs in the order they finished; the forest (seeded) must see the
-    configurations in one order whatever it was, or the same sweep gets different importances."""
+    configurations in one order whatever it was, or the same sweep gets different importances.
+    Also when some trials lack a field (a tuned comparison's defaults beside its samples)."""
     trials = make()
+    if missing:
+        trials.loc[trials.index % 7 == 0, fields[-1]] = None
     listed = importance.importances(trials, fields)
     for seed in (1, 2):
         shuffled = importance.importances(trials.sample(frac=1, random_state=seed), fields)
