@@ -108,6 +108,10 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         # Tune would keep such a trial PENDING forever on the local Ray this command starts.
         raise ValueError(f"{origin(('cpus_per_trial',))} {cpus} is more than this machine's {os.cpu_count()} CPUs; "
                          f"accepted: 1..{os.cpu_count()} (or --address a larger cluster)")
+    if sweep.tuned_limit is not None and sweep.preset != "tuned":
+        raise ValueError(f"{origin(('tuned_limit',))} {sweep.tuned_limit:g} without preset: tuned (it names the "
+                         "limit whose registry entry preset: tuned runs); accepted: with preset: tuned, or no "
+                         "tuned_limit")
     tasks, user_tasks = resolve_tasks(sweep, search_dirs, origin)
     seeds = sweep.seed_list()
     count = sweep.num_samples * len(seeds) if sweep.is_search else spaces.count_trials(sweep, tasks)
@@ -171,22 +175,45 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
 
 def with_tuned(trials: list[TrialSpec], sweep: SweepFile, sets: dict, registry: str | None) -> list[TrialSpec]:
     """``preset: tuned``: each trial (the frontier's aside) starts from its task's and algorithm's entry
-    in the registry of tuned configurations, below the sweep's ``set`` and its own swept values;
-    refused in one line where there is no entry, or it was tuned at another budget or in another
-    environment (sweeps/tuned_registry.py ``tuned_fields``)."""
-    from lac_rllib.algorithms.registry import ALGO_FIELD
-    from sweeps.tuned_registry import DEFAULT_REGISTRY, tuned_fields
+    in the registry of tuned configurations, below the sweep's ``set`` and its own swept values. The
+    entry is chosen and checked per trial, after its group's and grid's fields: tuned at the sweep's
+    budget, at the trial's limit (each rung of a ladder its own; the sweep file's ``tuned_limit``
+    names another explicitly) and in the environment the trial has with the entry applied. Refused
+    in one line where there is none (sweeps/tuned_registry.py ``tuned_entry``); an entry whose
+    verdict is that the default stands starts its trials from the default, said in one line."""
+    import json
 
-    cache, out = {}, []
+    from lac_rllib.algorithms.registry import ALGO_FIELD
+    from lac_rllib.tasks import get_task
+    from lac_rllib.tasks.fingerprint import fingerprint
+    from sweeps.tuned_registry import DEFAULT_REGISTRY, DEFAULT_STANDS, applied, tuned_entry
+
+    registry = Path(registry or DEFAULT_REGISTRY)
+    cache, said, out = {}, set(), []
     for t in trials:
         if t.group == spaces.FRONTIER_GROUP:
             out.append(t)
             continue
         algo = t.overrides.get(ALGO_FIELD, sets.get(ALGO_FIELD, DEFAULT_ALGO))
-        if (t.task, algo) not in cache:
-            cache[t.task, algo] = tuned_fields(Path(registry or DEFAULT_REGISTRY), t.task, algo, sweep.budget, sets)
-        tuned = {k: v for k, v in cache[t.task, algo].items() if k not in t.overrides and k not in sets}
-        out.append(dataclasses.replace(t, overrides={**tuned, **t.overrides}))
+        key = (t.task, json.dumps(t.overrides, sort_keys=True, default=str))  # its seeds share the configuration
+        if key not in cache:
+            own = spaces.trial_params(t.task, sweep.budget, sets, t.overrides)
+            limit = own.get(spaces.COST_LIMIT_FIELD)
+            limit = get_task(t.task).cost_limit if limit is None else limit
+
+            def environment(config: dict, t=t) -> dict:  # the trial's fingerprint with an entry's fields under it
+                tuned = {k: v for k, v in config.items() if k not in t.overrides and k not in sets}
+                return fingerprint(t.task, spaces.trial_params(t.task, sweep.budget, sets, {**tuned, **t.overrides}))
+
+            path, entry = tuned_entry(registry, t.task, algo, sweep.budget, float(limit), environment,
+                                      dataclasses.replace(t, params=own).config_label(), sweep.tuned_limit)
+            cache[key] = {k: v for k, v in applied(entry).items() if k not in t.overrides and k not in sets}
+            if entry.verdict == DEFAULT_STANDS and path not in said:
+                said.add(path)
+                print(f"preset: tuned: {path}: tuning {algo} on {t.task} at budget {entry.budget}, limit "
+                      f"{entry.cost_limit:g} did not beat its default on fresh seeds (verdict {DEFAULT_STANDS}): "
+                      "its trials run the default", flush=True)
+        out.append(dataclasses.replace(t, overrides={**cache[key], **t.overrides}))
     return out
 
 

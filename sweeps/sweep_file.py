@@ -474,8 +474,12 @@ class SweepFile(BaseModel):
     is written to the registry of tuned configurations (:class:`TuneSpec`)."""
     preset: Literal["tuned"] | None = None
     """``tuned``: every trial starts from the registry's tuned configuration of its task, algorithm and
-    budget (``tuned/<task>/<algo>.yaml``, ``lac-sweep registry`` lists them) instead of the algorithm's
+    budget (``tuned/<task>/<algo>/``, ``lac-sweep registry`` lists them) instead of the algorithm's
     defaults; refused before Ray starts where the registry has none or its env fingerprint differs."""
+    tuned_limit: NonNegative | None = None
+    """With ``preset: tuned``: the limit whose registry entry every trial starts from, whatever limit it
+    runs at (each rung of ``cost_limits`` too). Default: each trial's own limit; an entry tuned at
+    another is refused before Ray starts."""
     score: Literal["eval", "train"] | None = None
     """What every trial is ranked on (sweeps/score.py): ``eval``, the evaluation block's deterministic
     episodes (default; ``train`` when ``eval_episodes`` is 0), or ``train``, the mean over its final

@@ -8,7 +8,9 @@ Lindauer & Raileanu, ICML 2023; Hamilton et al. 2022). Here each algorithm the s
 Ray starts unless the budgets are equal: :func:`check_equal_budgets`). Then one confirmation
 ``NAME-confirm`` reruns every algorithm's best configuration (``ALGO-tuned1``…) beside its default
 (``ALGO-default``) on ``tune.confirm_seeds`` fresh seeds, and the report (sweeps/reports/tuned.py)
-says per algorithm what tuning changed; each winner goes to the registry (sweeps/tuned_registry.py).
+says per algorithm what tuning changed; each verdict goes to the registry (sweeps/tuned_registry.py):
+the tuned configuration where the paired test on the fresh seeds showed it better, else that the
+default stands.
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ class TunedPlan:
 
     sweep: SweepFile  #: the resolved sweep file with its ``tune:``
     searches: dict  #: algo → its search's Plan
-    registry: Path  #: where the winners are written (tuned/<task>/<algo>.yaml)
+    registry: Path  #: where the verdicts are written (tuned/<task>/<algo>/<key>.yaml, sweeps/tuned_registry.py)
+    #: Whether ``--registry`` named it: a smoke comparison writes into a registry only then.
+    registry_asked: bool = False
 
     @property
     def name(self) -> str:
@@ -122,7 +126,8 @@ def make_tuned_plan(sweep: SweepFile, space: str, infra, search_dirs=(), origin=
         own = dataclasses.replace(infra, resume=infra.resume and (Path(infra.storage) / sub.name / SWEEP_FILE).exists())
         searches[algo] = plan_sweep(sub, TUNE, own, search_dirs, origin, max_trials=max_trials)
     check_equal_budgets({a: budget_of(p) for a, p in searches.items()})
-    return TunedPlan(sweep=sweep, searches=searches, registry=Path(registry or DEFAULT_REGISTRY))
+    return TunedPlan(sweep=sweep, searches=searches, registry=Path(registry or DEFAULT_REGISTRY),
+                     registry_asked=registry is not None)
 
 
 def print_tuned_plan(tp: TunedPlan) -> None:
@@ -137,7 +142,12 @@ def print_tuned_plan(tp: TunedPlan) -> None:
               f"~{p.estimated_cpu_h:.2f} CPU-hours (its speed), search over {', '.join(p.sweep.search)}")
     print(f"  then: each algorithm's best {t.top} beside its default on {t.confirm_seeds} fresh seeds "
           f"(from {max(first.seeds) + 1}), all in one confirmation '{tp.name}-{CONFIRM}'")
-    print(f"  registry: {tp.registry}", flush=True)
+    from sweeps.tuned_registry import destination
+
+    where, why = destination(tp)
+    print(f"  registry: {where}" + (f" ({why})" if why else "") + ": each algorithm's tuned configuration where the "
+          "paired test on the fresh seeds shows it better than its default, else that the default stands",
+          flush=True)
 
 
 def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:

@@ -1,26 +1,64 @@
-"""The registry of tuned configurations: ``tuned/<task>/<algo>.yaml``, one confirmed winner each.
+"""The registry of tuned configurations: ``tuned/<task>/<algo>/<budget>-b<limit>-<env>.yaml``, one
+entry per algorithm and what it was tuned under.
 
-A tuned comparison (sweeps/tuned.py) writes each algorithm's confirmed winner with its evidence: the
-configuration (the searched fields' values), the budget, the limit, the seeds of the search and of the
-confirmation, the fresh-seed scores with intervals, the sweeps' MLflow runs, the commit and the env
-fingerprint (lac_rllib/tasks/fingerprint.py). ``preset: tuned`` in a sweep file starts every trial
-from its task's, algorithm's and budget's entry; an entry is read as untrusted input (bounded YAML, a
-pydantic model with no unknown keys, every field checked against its algorithm's declaration) and is
-refused in one line, before Ray starts, where it is missing, malformed, or of another environment.
-``lac-sweep registry`` lists the entries.
+A tuned comparison (sweeps/tuned.py) writes each algorithm's **verdict** with its evidence:
+
+- ``improved``: the tuned configuration beat the default on the confirmation's fresh seeds by the
+  paired test (sweeps/reports/tuned.py ``improved``: it is feasible and the paired gap's interval
+  lies wholly above 0). ``config`` is that configuration: what ``preset: tuned`` sets.
+- ``default-stands``: it did not. ``config`` is empty and ``candidate`` holds the configuration that
+  was tried; ``preset: tuned`` runs the algorithm's default and says so in one line.
+
+Beside it: the budget, the limit and the constraints it was judged under, the search (searcher,
+samples, how many came from the searcher's random start, the declared search space as data), the
+seeds of the search and of the confirmation, the fresh-seed scores of both with their intervals and
+per seed, the paired gap, the interval methods (sweeps/reports/verdicts.py ``METHODS``), the sweeps'
+MLflow runs, the commit the search ran at (its MLflow parent run's ``git_commit``; where that is not
+found, the commit when the entry was written, ``commit_source`` says which) and the env fingerprint
+(lac_rllib/tasks/fingerprint.py).
+
+**No entry is lost.** An entry is kept per what it was tuned under, its key ``BUDGET-bLIMIT-ENV``
+(the budget, the limit, i.e. the one summed cost's constraint, and the fingerprint's id): a
+comparison at another budget, limit or environment writes beside it. One with the same key replaces
+it, said in the output, the old entry moved to ``history/`` beside it (named by its date or commit).
+A ``smoke`` comparison writes into a registry only when ``--registry`` names one: otherwise into
+``registry/`` in its confirmation's directory, said where.
+
+``preset: tuned`` starts every trial from the entry of its task and algorithm at the sweep's budget,
+at the trial's limit (or the sweep file's ``tuned_limit``) and in the environment the trial has
+(checked per trial, after its group's and grid's fields). An entry is read as untrusted input
+(bounded YAML, a pydantic model with no unknown keys, every field checked against its algorithm's
+declaration) and is refused in one line, before Ray starts, where it is missing, malformed, or of
+another budget, limit or environment. ``lac-sweep registry`` lists the entries.
+
+Entries written before the verdict and the search's record (the shipped ones, and the earlier layout
+``tuned/<task>/<algo>.yaml``, still read) lack those fields: None, listed as "unknown"; an entry
+without a verdict is applied as it was.
 """
 
 from __future__ import annotations
 
+import datetime
 import json
+import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 #: The repository's registry (entries ship with the code: tuned/ beside sweeps/).
 DEFAULT_REGISTRY = Path(__file__).resolve().parents[1] / "tuned"
+#: The verdicts an entry carries.
+IMPROVED, DEFAULT_STANDS = "improved", "default-stands"
+#: Where a replaced entry is kept, beside the entries of its algorithm.
+HISTORY = "history"
+#: The budget whose comparisons write into a registry only when ``--registry`` names one.
+SMOKE = "smoke"
+#: Where ``commit`` came from.
+COMMIT_FROM_SEARCH = "the search's MLflow parent run (param git_commit)"
+COMMIT_AT_WRITE = "git HEAD when the entry was written: the search's MLflow parent run gave no commit"
 
 
 class Scores(BaseModel):
@@ -33,10 +71,13 @@ class Scores(BaseModel):
     cost_mean: float | None
     cost_ci: tuple[float | None, float | None]
     p_feasible: float | None = Field(None, ge=0, le=1)
+    p_feasible_ci: tuple[float | None, float | None] | None = None
+    """P(feasible)'s interval (``intervals.proportion``); None: not recorded."""
 
 
 class Entry(BaseModel):
-    """One tuned configuration and its evidence."""
+    """One algorithm's tuned configuration (or the verdict that its default stands) and its evidence.
+    The fields after ``fingerprint_id`` came later: None where an entry predates them (unknown)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     task: str = Field(min_length=1, max_length=200)
@@ -50,71 +91,260 @@ class Entry(BaseModel):
     cost_limit: float = Field(ge=0)
     """The limit it was judged at."""
     config: dict[str, Any]
-    """The searched fields' values: what ``preset: tuned`` sets on top of the algorithm's defaults."""
+    """What ``preset: tuned`` sets on top of the algorithm's defaults: the searched fields' values; empty
+    (or ignored) where the verdict is that the default stands."""
     search_seeds: tuple[int, ...]
     """The seeds the search trained each configuration with."""
     fresh_seeds: tuple[int, ...]
-    """The confirmation's seeds, none of which the search saw."""
+    """The confirmation's seeds (their integers are not the search's)."""
     fresh: Scores
-    """Its scores on the fresh seeds."""
+    """The tuned configuration's scores on the fresh seeds."""
     default_fresh: Scores
     """The algorithm's default on the same fresh seeds."""
     search: dict[str, Any]
     """Its figures on the search's seeds (the winner's curse is their difference to ``fresh``)."""
     search_feasible: bool = True
-    """Whether its search had a configuration feasible on average; where not, this one is the least
-    costly (sweeps/tuned.py ``pick_winners``), written so that ``preset: tuned`` is not read as a safe choice."""
+    """Whether its search had a feasible configuration; where not, this one is the least costly
+    (sweeps/tuned.py ``pick_winners``), written so that ``preset: tuned`` is not read as a safe choice."""
     mlflow: dict[str, str]
     """The tracking URI and the parent runs: the search's and the confirmation's."""
     commit: str
-    """The code's commit."""
+    """The code's commit (``commit_source``: the search's or the writer's)."""
     fingerprint: dict[str, Any]
     """The env fingerprint its runs had (lac_rllib/tasks/fingerprint.py)."""
     fingerprint_id: str
     """Its id."""
+    verdict: Literal["improved", "default-stands"] | None = None
+    """``improved``: the paired test on the fresh seeds showed the tuned configuration better than the
+    default, ``config`` is it; ``default-stands``: it did not, ``preset: tuned`` runs the default."""
+    candidate: dict[str, Any] | None = None
+    """Where the default stands: the tuned configuration that was confirmed and not shown better."""
+    constraints: dict[str, float] | None = None
+    """What it was constrained by: ``{cost: LIMIT}`` (the one summed cost)."""
+    searcher: str | None = None
+    """The search's sampler."""
+    num_samples: int | None = Field(None, ge=1)
+    """Configurations the search sampled."""
+    random_start: int | None = Field(None, ge=0)
+    """How many of them the searcher drew in its random start (sweeps/search.py)."""
+    search_space: dict[str, Any] | None = None
+    """The algorithm's declared distributions the search sampled, as data."""
+    by_seed: dict[Literal["tuned", "default"], dict[int, float | None]] | None = None
+    """Return on each fresh seed: the tuned configuration's and the default's."""
+    gap: tuple[float | None, float | None, float | None] | None = None
+    """Tuned − default in return, paired by seed: (mean, low, high) (``intervals.paired``)."""
+    pairs: int | None = Field(None, ge=0)
+    """The seeds both finished: what the paired gap rests on."""
+    p_improvement: float | None = Field(None, ge=0, le=1)
+    """P(a tuned seed beats a default one)."""
+    intervals: dict[str, str] | None = None
+    """How each interval was computed (sweeps/reports/verdicts.py ``METHODS``): mean, paired, proportion."""
+    commit_source: str | None = None
+    """Where ``commit`` came from: the search's parent run, or the writer's HEAD."""
+    written: str | None = None
+    """When the entry was written (UTC, ISO 8601)."""
 
 
-def entry_path(registry: Path, task: str, algo: str) -> Path:
+def _num(x: float) -> str:
+    """A limit as a file name's part: ``2``, ``0.5``, exact (``repr`` where ``g`` would round)."""
+    s = f"{float(x):g}"
+    return s if float(s) == float(x) else repr(float(x))
+
+
+def entry_key(budget, cost_limit: float, fingerprint_id: str) -> str:
+    """What an entry is kept by: its budget, its limit (the constraints: one summed cost) and its env."""
+    return f"{budget}-b{_num(cost_limit)}-{fingerprint_id}"
+
+
+def key_of(entry: Entry) -> str:
+    return entry_key(entry.budget, entry.cost_limit, entry.fingerprint_id)
+
+
+def entry_path(registry: Path, task: str, algo: str, key: str) -> Path:
+    return Path(registry) / task / algo / f"{key}.yaml"
+
+
+def legacy_path(registry: Path, task: str, algo: str) -> Path:
+    """Where entries were written before they were kept by key (one per task and algorithm)."""
     return Path(registry) / task / f"{algo}.yaml"
+
+
+def entry_paths(registry: Path, task: str, algo: str) -> list[Path]:
+    """The current entries of ``algo`` on ``task`` (not those in ``history/``), the earlier layout's last."""
+    folder = Path(registry) / task / algo
+    paths = sorted(folder.glob("*.yaml")) if folder.is_dir() else []
+    legacy = legacy_path(registry, task, algo)
+    return paths + ([legacy] if legacy.is_file() else [])
+
+
+def applied(entry: Entry) -> dict:
+    """The fields ``preset: tuned`` sets from ``entry``: none where the default stands."""
+    return {} if entry.verdict == DEFAULT_STANDS else dict(entry.config)
 
 
 def _scores(fig: dict) -> dict:
     ret, cost = fig["return"], fig["cost"]
+    p_ci = fig.get("p_feasible_ci")
     return {"n_seeds": fig["n_seeds"], "return_mean": _f(ret[0]), "return_ci": (_f(ret[1]), _f(ret[2])),
-            "cost_mean": _f(cost[0]), "cost_ci": (_f(cost[1]), _f(cost[2])), "p_feasible": _f(fig["p_feasible"])}
+            "cost_mean": _f(cost[0]), "cost_ci": (_f(cost[1]), _f(cost[2])), "p_feasible": _f(fig["p_feasible"]),
+            "p_feasible_ci": None if p_ci is None else (_f(p_ci[1]), _f(p_ci[2]))}
 
 
 def _f(x):
     return None if x is None or x != x else float(x)
 
 
+def destination(tp) -> tuple[Path, str | None]:
+    """Where a tuned comparison writes its entries, and why there where it is not its registry: a
+    ``smoke`` comparison writes into a registry only when ``--registry`` names one."""
+    if str(tp.sweep.budget) == SMOKE and not tp.registry_asked:
+        from sweeps.tuned import CONFIRM
+
+        first = next(iter(tp.searches.values()))
+        return (Path(first.storage) / f"{tp.name}-{CONFIRM}" / "registry",
+                f"a {SMOKE} budget writes into a registry only when --registry names one")
+    return Path(tp.registry), None
+
+
+def search_commit(tracking_uri: str, run_id: str) -> tuple[str, str]:
+    """The commit a search ran at, from its MLflow parent run (``git_commit``), and where it came from;
+    where the run is not found or recorded none, this checkout's HEAD (said in the second)."""
+    from sweeps.record import git_commit
+
+    commit = None
+    db = tracking_uri.removeprefix("sqlite:///") if tracking_uri.startswith("sqlite:///") else None
+    if db is None or Path(db).exists():  # a missing sqlite file is not made here
+        try:
+            from mlflow import MlflowClient
+
+            commit = MlflowClient(tracking_uri).get_run(run_id).data.params.get("git_commit")
+        except Exception:  # noqa: BLE001 (an unreachable or pruned store: the fallback, said in the entry)
+            commit = None
+    if commit and commit != "unknown":
+        return commit, COMMIT_FROM_SEARCH
+    return git_commit(), COMMIT_AT_WRITE
+
+
+def _random_start(plan) -> int | None:
+    """How many of the search's samples its searcher drew at random (the plan's, else sweeps/search.py's
+    rule); None where neither says."""
+    if getattr(plan, "random_start", None) is not None:
+        return int(plan.random_start)
+    try:
+        from sweeps.search import random_start
+    except ImportError:
+        return None
+    return random_start(plan.sweep.searcher, plan.sweep.num_samples)
+
+
+def _space(search) -> dict | None:
+    if not search:
+        return None
+    return _plain(json.loads(json.dumps({k: d.model_dump(exclude_none=True) if hasattr(d, "model_dump") else d
+                                         for k, d in search.items()}, default=str)))
+
+
 def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: dict, trials) -> list[Path]:
-    """Each algorithm's confirmed winner written to ``tp.registry`` (an entry replaced by a newer one)."""
+    """Each algorithm's verdict written (:func:`destination`): its tuned configuration where the paired
+    test on the fresh seeds showed it better than the default, else ``default-stands``; an entry of the
+    same key is replaced only with the old one kept in ``history/`` (both said)."""
     from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
     from sweeps import spaces
-    from sweeps.record import git_commit, parent_run_id
+    from sweeps.record import parent_run_id
+    from sweeps.reports.verdicts import METHODS
 
+    registry, why = destination(tp)
+    if why:
+        print(f"registry: {why}: the entries go to {registry}", flush=True)
     written = []
     fresh = tuple(sorted(int(s) for s in trials["seed"].unique()))
+    now = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat()
     for algo, v in comp["algorithms"].items():
         plan = searches[algo]
-        fields = winners[algo][0]["fields"]
-        params = spaces.trial_params(tp.task, tp.sweep.budget, {**plan.sets}, {"algo": algo, **fields})
+        winner = winners[algo][0]
+        fields = _plain(json.loads(json.dumps(winner["fields"], default=str)))
+        improved = bool(v["improved"])
+        config = fields if improved else {}
+        params = spaces.trial_params(tp.task, tp.sweep.budget, {**plan.sets}, {"algo": algo, **config})
         fp = fingerprint(tp.task, params)
+        limit = float(v["tuned"]["limit"])
+        search_run = parent_run_id(Path(plan.storage) / plan.name)
+        commit, source = search_commit(plan.tracking_uri, search_run)
+        gap = v.get("gap")
         entry = Entry(task=tp.task, algo=algo, budget=tp.sweep.budget, timesteps=plan.timesteps,
-                      cost_limit=v["tuned"]["limit"], config=json.loads(json.dumps(fields, default=str)),
-                      search_seeds=plan.seeds, fresh_seeds=fresh, fresh=_scores(v["tuned"]),
-                      default_fresh=_scores(v["default"]), search=winners[algo][0]["search"],
-                      search_feasible=winners[algo][0]["feasible"],
-                      mlflow={"tracking_uri": plan.tracking_uri,
-                              "search_run": parent_run_id(Path(plan.storage) / plan.name),
+                      cost_limit=limit, config=config, search_seeds=plan.seeds, fresh_seeds=fresh,
+                      fresh=_scores(v["tuned"]), default_fresh=_scores(v["default"]), search=winner["search"],
+                      search_feasible=winner["feasible"],
+                      mlflow={"tracking_uri": plan.tracking_uri, "search_run": search_run,
                               "confirmation_run": confirm_parent},
-                      commit=git_commit(), fingerprint=fp, fingerprint_id=fingerprint_id(fp))
-        path = entry_path(tp.registry, tp.task, algo)
+                      commit=commit, fingerprint=fp, fingerprint_id=fingerprint_id(fp),
+                      verdict=IMPROVED if improved else DEFAULT_STANDS, candidate=None if improved else fields,
+                      constraints={"cost": limit}, searcher=plan.sweep.searcher, num_samples=plan.sweep.num_samples,
+                      random_start=_random_start(plan), search_space=_space(plan.sweep.search),
+                      by_seed={"tuned": _by_seed(v["tuned"]), "default": _by_seed(v["default"])},
+                      gap=None if gap is None else tuple(_f(x) for x in gap), pairs=v.get("pairs"),
+                      p_improvement=_f(v.get("p_improvement")),
+                      intervals={k: METHODS[k] for k in ("mean", "paired", "proportion")},
+                      commit_source=source, written=now)
+        key = key_of(entry)
+        path = entry_path(registry, tp.task, algo, key)
+        text = yaml.safe_dump(_plain(entry.model_dump()), sort_keys=False, width=110, allow_unicode=True)
+        _keep_replaced(registry, tp.task, algo, key, path, text)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(yaml.safe_dump(_plain(entry.model_dump()), sort_keys=False, width=110))
+        path.write_text(text)
+        if not improved:
+            print(f"registry: {algo} on {tp.task}: tuning did not beat the default on the fresh seeds (paired gap "
+                  f"{_gap_text(entry.gap)}): {path} says the default stands", flush=True)
         written.append(path)
     return written
+
+
+def _by_seed(fig: dict) -> dict:
+    return {int(s): _f(r) for s, r in sorted(fig.get("by_seed", {}).items())}
+
+
+def _gap_text(gap) -> str:
+    if not gap or gap[0] is None:
+        return "unknown"
+    return f"{gap[0]:.3g}" + ("" if gap[1] is None else f" [{gap[1]:.3g}, {gap[2]:.3g}]")
+
+
+def _keep_replaced(registry: Path, task: str, algo: str, key: str, path: Path, text: str) -> None:
+    """An entry of the same key as the one about to be written at ``path`` (there, or in the earlier
+    layout) moved to ``history/`` and said; one with the same bytes is left as it is."""
+    olds = [path] if path.is_file() else []
+    legacy = legacy_path(registry, task, algo)
+    if legacy.is_file():
+        try:
+            if key_of(read_entry(legacy)) == key:
+                olds.append(legacy)
+        except ValueError:
+            pass  # unreadable: not the same key as far as anyone can tell; left where it is
+    for old in olds:
+        if old == path and old.read_text() == text:
+            continue
+        kept = _history_path(registry, task, algo, key, old)
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        old.rename(kept)
+        print(f"registry: {path} replaces an entry tuned under the same budget, limit and environment ({key}); "
+              f"the old entry is kept as {kept}", flush=True)
+
+
+def _history_path(registry: Path, task: str, algo: str, key: str, old: Path) -> Path:
+    """``history/KEY.STAMP.yaml``: the old entry's date written, else its commit's first 12 characters."""
+    try:
+        data = yaml.safe_load(old.read_text()) or {}
+    except yaml.YAMLError:
+        data = {}
+    data = data if isinstance(data, dict) else {}
+    stamp = str(data.get("written") or str(data.get("commit") or "unknown")[:12])
+    stamp = "".join(c if c.isalnum() or c in "-_" else "-" for c in stamp)
+    folder = Path(registry) / task / algo / HISTORY
+    kept, n = folder / f"{key}.{stamp}.yaml", 1
+    while kept.exists():
+        n += 1
+        kept = folder / f"{key}.{stamp}.{n}.yaml"
+    return kept
 
 
 def _plain(v):
@@ -126,8 +356,9 @@ def _plain(v):
 
 
 def read_entry(path: Path) -> Entry:
-    """An entry read as untrusted input: bounded YAML, the schema, every field of ``config`` against
-    its algorithm's declaration; a ValueError of one line naming the file and what is wrong."""
+    """An entry read as untrusted input: bounded YAML, the schema, every field of ``config`` (and of
+    ``candidate``) against its algorithm's declaration; a ValueError of one line naming the file and
+    what is wrong."""
     from sweeps.bounded_yaml import YamlRefused, read_text
     from sweeps.bounded_yaml import read as read_yaml
     from sweeps.sweep_file import FieldError, NumbersLoader, check_field
@@ -150,43 +381,79 @@ def read_entry(path: Path) -> Entry:
         from lac_rllib.algorithms.registry import check_algo
 
         check_algo(entry.algo)
-        for name, value in entry.config.items():
-            check_field(name, value, (entry.algo,), ("config", name))
+        for part in ("config", "candidate"):
+            for name, value in (getattr(entry, part) or {}).items():
+                check_field(name, value, (entry.algo,), (part, name))
     except FieldError as e:
         raise ValueError(f"{path}: {'.'.join(map(str, e.loc))}: {e.message}") from None
     return entry
 
 
-def tuned_fields(registry: Path, task: str, algo: str, budget, sets: dict) -> dict:
-    """The fields ``preset: tuned`` sets for a trial of ``algo`` on ``task`` at ``budget``: its entry's
-    configuration, refused where there is none for that budget or its env fingerprint differs from
-    the one such a trial has here."""
-    from lac_rllib.tasks.fingerprint import differences, fingerprint, fingerprint_id
-    from sweeps import spaces
+def tuned_entry(registry: Path, task: str, algo: str, budget, limit: float, environment: Callable[[dict], dict],
+                trial: str = "", tuned_limit: float | None = None) -> tuple[Path, Entry]:
+    """The entry ``preset: tuned`` starts a trial of ``algo`` on ``task`` from: tuned at ``budget``, at
+    the trial's ``limit`` (or at ``tuned_limit``, where the sweep file names one), in the environment
+    the trial has with the entry's fields applied (``environment``: those fields → the trial's
+    fingerprint). Refused in one line where there is no entry, or none at that budget, that limit or
+    in that environment (the first such entry's difference named)."""
+    from lac_rllib.tasks.fingerprint import differences, fingerprint_id
 
-    path = entry_path(registry, task, algo)
-    if not path.is_file():
-        have = sorted(str(p.relative_to(registry)) for p in Path(registry).glob("**/*.yaml")) if Path(
-            registry).is_dir() else []
+    registry = Path(registry)
+    paths = entry_paths(registry, task, algo)
+    if not paths:
+        have = sorted(str(p.relative_to(registry)) for p in _current(registry)) if registry.is_dir() else []
         raise ValueError(f"preset: tuned: the registry {registry} has no entry for {algo} on {task}; accepted: "
                          f"{', '.join(have) or 'none yet'} (a tuned comparison writes them: tune: in a sweep file)")
-    entry = read_entry(path)
-    if entry.task != task or entry.algo != algo:
-        raise ValueError(f"{path}: an entry of {entry.algo} on {entry.task} filed as {algo} on {task}; refused")
-    if str(entry.budget) != str(budget):
-        raise ValueError(f"preset: tuned: {path} was tuned at budget {entry.budget}, this sweep's is {budget}; "
-                         f"accepted: budget {entry.budget}, or tune at {budget}")
-    params = spaces.trial_params(task, budget, sets, {"algo": algo, **entry.config})
-    now = fingerprint(task, params)
-    if fingerprint_id(now) != entry.fingerprint_id:  # read_entry checked the id is its fingerprint's
-        raise ValueError(f"preset: tuned: {path} was tuned in another environment: "
-                         f"{differences(entry.fingerprint, now)}; accepted: an entry tuned in this one")
-    return dict(entry.config)
+    found = []
+    for p in paths:
+        e = read_entry(p)
+        if e.task != task or e.algo != algo:
+            raise ValueError(f"{p}: an entry of {e.algo} on {e.task} filed as {algo} on {task}; refused")
+        found.append((p, e))
+    at_budget = [(p, e) for p, e in found if str(e.budget) == str(budget)]
+    if not at_budget:
+        p, e = found[0]
+        budgets = ", ".join(dict.fromkeys(str(e.budget) for _, e in found))
+        raise ValueError(f"preset: tuned: {p} was tuned at budget {e.budget}, this sweep's is {budget}; "
+                         f"accepted: budget {budgets}, or tune at {budget}")
+    want = float(limit if tuned_limit is None else tuned_limit)
+    at_limit = [(p, e) for p, e in at_budget if math.isclose(e.cost_limit, want, rel_tol=1e-9, abs_tol=1e-12)]
+    if not at_limit:
+        p, e = at_budget[0]
+        limits = ", ".join(dict.fromkeys(_num(e.cost_limit) for _, e in at_budget))
+        if tuned_limit is not None:
+            raise ValueError(f"preset: tuned: tuned_limit {_num(want)}: the registry {registry} has no entry for "
+                             f"{algo} on {task} at budget {budget} tuned at that limit; accepted: tuned_limit "
+                             f"{limits}")
+        raise ValueError(f"preset: tuned: {p} was tuned at limit {_num(e.cost_limit)}, trial {trial} runs at "
+                         f"{_num(want)}; accepted: an entry tuned at {_num(want)}, or tuned_limit: "
+                         f"{_num(e.cost_limit)} in the sweep file to start every trial from the limit-"
+                         f"{_num(e.cost_limit)} entry")
+    first = None
+    for p, e in at_limit:
+        now = environment(applied(e))
+        if fingerprint_id(now) == e.fingerprint_id:  # read_entry checked the id is its fingerprint's
+            return p, e
+        first = first or (p, e, now)
+    p, e, now = first
+    raise ValueError(f"preset: tuned: {p} was tuned in another environment: {differences(e.fingerprint, now)} "
+                     f"(trial {trial}); accepted: an entry tuned in the environment the trial has")
+
+
+def _current(registry: Path) -> list[Path]:
+    """Every entry in ``registry`` but those kept in ``history/``."""
+    return [p for p in sorted(Path(registry).glob("**/*.yaml")) if HISTORY not in p.relative_to(registry).parts]
+
+
+def _unknown(v) -> str:
+    return "unknown" if v is None else str(v)
 
 
 def listing(registry: Path) -> str:
-    """``lac-sweep registry``: one line per entry."""
-    paths = sorted(Path(registry).glob("**/*.yaml")) if Path(registry).is_dir() else []
+    """``lac-sweep registry``: one line per entry (its replaced ones counted); what an entry written
+    before a field existed lacks is listed as unknown."""
+    registry = Path(registry)
+    paths = _current(registry) if registry.is_dir() else []
     if not paths:
         return f"no tuned configurations in {registry}"
     lines = [f"tuned configurations in {registry}:"]
@@ -197,9 +464,37 @@ def listing(registry: Path) -> str:
             lines.append(f"  {p.relative_to(registry)}: refused: {err}")
             continue
         f = e.fresh
-        lines.append(f"  {e.task} {e.algo} @ {e.budget} (limit {e.cost_limit:g}): "
-                     f"{', '.join(f'{k}={v}' for k, v in e.config.items())}; fresh seeds {len(e.fresh_seeds)}: "
-                     f"return {f.return_mean:.3g}, cost {f.cost_mean:.3g} (default {e.default_fresh.return_mean:.3g}, "
-                     f"{e.default_fresh.cost_mean:.3g}); env {e.fingerprint_id}"
-                     + ("" if e.search_feasible else "; its search had nothing feasible: the least costly"))
+        fields = ", ".join(f"{k}={v}" for k, v in e.config.items())
+        if e.verdict == DEFAULT_STANDS:
+            tried = ", ".join(f"{k}={v}" for k, v in (e.candidate or e.config).items())
+            what = f"the default stands (tuned {tried or '?'} was not shown better)"
+        else:
+            what = fields
+        missing = [name for name, v in (("verdict", e.verdict), ("searcher", e.searcher), ("samples", e.num_samples),
+                                        ("random start", e.random_start), ("search space", e.search_space),
+                                        ("per-seed scores", e.by_seed), ("paired gap", e.gap),
+                                        ("interval methods", e.intervals), ("the commit's source", e.commit_source))
+                   if v is None]
+        search = (f"; search {e.searcher} × {e.num_samples} samples ({_unknown(e.random_start)} from its random start)"
+                  if e.searcher and e.num_samples else "")
+        lines.append(f"  {e.task} {e.algo} @ {e.budget} (limit {e.cost_limit:g}): {what}; verdict "
+                     f"{_unknown(e.verdict)}; fresh seeds {len(e.fresh_seeds)}: return {_g(f.return_mean)}, cost "
+                     f"{_g(f.cost_mean)} (default {_g(e.default_fresh.return_mean)}, {_g(e.default_fresh.cost_mean)})"
+                     + ("" if e.gap is None else f", paired gap {_gap_text(e.gap)}") + search
+                     + f"; commit {e.commit[:12]}{_commit_from(e.commit_source)}; env {e.fingerprint_id}"
+                     + ("" if e.search_feasible else "; its search had nothing feasible: the least costly")
+                     + (f"; unknown (written before they were recorded): {', '.join(missing)}" if missing else ""))
+    kept = [p for p in sorted(registry.glob(f"**/{HISTORY}/*.yaml"))]
+    if kept:
+        lines.append(f"  and {len(kept)} replaced entr{'y' if len(kept) == 1 else 'ies'} kept in {HISTORY}/ folders")
     return "\n".join(lines)
+
+
+def _commit_from(source: str | None) -> str:
+    if source is None:
+        return ""
+    return " (the search's)" if source == COMMIT_FROM_SEARCH else " (when written: the search's not found)"
+
+
+def _g(x) -> str:
+    return "unknown" if x is None else f"{x:.3g}"

@@ -155,16 +155,24 @@ def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_ses
     assert "## Tuned comparison" in out and "Ranking on the fresh seeds" in out
     registry = tmp_path / "registry"
     for algo in ("lac", "ppo_lag"):
-        entry = yaml.safe_load((registry / "lac/PointHazard-v0" / f"{algo}.yaml").read_text())
+        path, = (registry / "lac/PointHazard-v0" / algo).glob("smoke-b2-*.yaml")  # kept by budget, limit, env
+        entry = yaml.safe_load(path.read_text())
         assert entry["fresh_seeds"] == [1, 2] and entry["search_seeds"] == [0] and entry["fresh"]["n_seeds"] == 2
-        assert set(entry["config"]) == set(search_space(algo)) and entry["mlflow"]["confirmation_run"]
-        assert isinstance(entry["search_feasible"], bool)
-    # preset: tuned runs each entry: the trial's params are the entry's configuration.
+        # The verdict: the tuned configuration only where the paired test showed it better.
+        assert entry["verdict"] in ("improved", "default-stands") and entry["mlflow"]["confirmation_run"]
+        assert set(entry["config"] if entry["verdict"] == "improved" else entry["candidate"]) == set(search_space(algo))
+        assert isinstance(entry["search_feasible"], bool) and entry["commit_source"].startswith("the search's MLflow")
+    # preset: tuned runs each entry: the trial's params are the entry's configuration, or the default.
     plan = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
                                "--name", "from-registry"))
     for t in plan.trials:
-        entry = yaml.safe_load((registry / "lac/PointHazard-v0" / f"{t.algo}.yaml").read_text())
-        assert {k: t.params[k] for k in entry["config"]} == pytest.approx(entry["config"]) and not t.default
+        path, = (registry / "lac/PointHazard-v0" / t.algo).glob("smoke-b2-*.yaml")
+        entry = yaml.safe_load(path.read_text())
+        if entry["verdict"] == "improved":
+            assert {k: t.params[k] for k in entry["config"]} == pytest.approx(entry["config"]) and not t.default
+        else:
+            base = spaces.trial_params(t.task, "smoke", {"algo": t.algo})
+            assert {k: t.params[k] for k in entry["candidate"]} == {k: base[k] for k in entry["candidate"]}
     assert listing(registry).count("lac/PointHazard-v0") == 2
 
 
