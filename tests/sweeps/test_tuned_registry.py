@@ -176,6 +176,15 @@ def test_old_format_entries_still_read_and_list_their_missing_fields_as_unknown(
     assert "verdict unknown" in text and "searcher, samples, random start, search space, per-seed scores" in text
 
 
+def test_the_shipped_trpo_lag_entry_tuned_worse_runs_the_default(tmp_path, capsys):
+    plan = cli.make_plan(_args(tmp_path, "algo: trpo_lag\nbudget: quick\nseeds: 1\npreset: tuned\n", registry=False))
+    default = spaces.trial_params(TASK, "quick", {"algo": "trpo_lag"})
+    assert plan.trials[0].params == default
+    out = capsys.readouterr().out
+    assert "trpo_lag/quick-b2-493ce206c175.yaml: tuning trpo_lag on lac/PointHazard-v0" in out
+    assert "(verdict default-stands): its trials run the default" in out
+
+
 def test_a_replacement_keeps_the_old_entry_and_says_so(tmp_path, capsys):
     registry = tmp_path / "registry"
     tp, = cli.make_plan(_args(tmp_path, SMOKE_TUNED))
