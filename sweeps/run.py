@@ -83,7 +83,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seeds", type=_int_at_least(1), default=None,
                    help="seeds per configuration (search: per sampled configuration; default 3)")
     p.add_argument("--seed-start", type=_int_at_least(0), default=None,
-                   help="the first seed (default 0): confirmation runs use seeds no search saw")
+                   help="the first seed (default 0); a confirmation by hand starts 1000 past the search's "
+                        "largest, or it reruns the search's env streams (sweeps/seeds.py)")
     p.add_argument("--num-samples", type=_int_at_least(1), default=None,
                    help="configurations a search samples (default 20)")
     p.add_argument("--max-concurrent", type=_int_at_least(1), default=None,

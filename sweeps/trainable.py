@@ -46,6 +46,7 @@ from sweeps.score import (
     eval_score,
     train_score,
 )
+from sweeps.seeds import EVAL_SEED_BASE, check_streams, eval_seed  # noqa: F401 (EVAL_SEED_BASE: named here before)
 from sweeps.tracking import (
     ALGO_TAG,
     CHECKPOINT_TAG,
@@ -71,15 +72,6 @@ from sweeps.tracking import (
 
 #: Episodes of the evaluation block at a trial's end unless the sweep file says (``eval_episodes``).
 EVAL_EPISODES = 10
-#: The evaluation block's env seeds start here, 1,000 per trial seed: far above the seeds RLlib
-#: gives the training envs (the trial's seed plus small offsets per env runner and env).
-EVAL_SEED_BASE = 2**30
-
-
-def eval_seed(seed: int) -> int:
-    """The first env seed of the evaluation block of a trial of ``seed`` (its episode i: + i)."""
-    return EVAL_SEED_BASE + 1_000 * int(seed)
-
 
 #: The evaluation block's modes unless the sweep file says (``eval_modes``): deterministic, then stochastic.
 EVAL_MODES = ("generator", "stochastic")
@@ -127,6 +119,8 @@ class SweepTrial(tune.Trainable):
         algo, fields = split_algo(spec.params)
         self.algo_config = build_config(algo, spec.task, spec.seed, {**fields, "torch_threads": cpus},
                                        timesteps=self.timesteps, cpus=cpus)
+        # Its streams within the seed stride, or a confirmation's could meet them (sweeps/seeds.py).
+        check_streams(self.algo_config.num_env_runners, self.algo_config.num_envs_per_env_runner)
         self.algo = self.algo_config.build_algo()
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,

@@ -23,6 +23,7 @@ from sweeps import spaces
 from sweeps.plan import Plan, plan_sweep
 from sweeps.record import SWEEP_FILE
 from sweeps.reports.tuned import DEFAULT, TUNED
+from sweeps.seeds import fresh_seeds, seeds_text
 from sweeps.sweep_file import SweepFile, check_fields
 
 TUNE, CONFIRM = "tune", "confirm"
@@ -133,7 +134,6 @@ def make_tuned_plan(sweep: SweepFile, space: str, infra, search_dirs=(), origin=
 def print_tuned_plan(tp: TunedPlan) -> None:
     """The comparison's budgets before anything runs: equal by construction, said per algorithm."""
     t = tp.sweep.tune
-    first = next(iter(tp.searches.values()))
     print(f"tuned comparison '{tp.name}': {', '.join(tp.searches)} on {tp.task}, budget {tp.sweep.budget}, "
           f"{t.searcher.upper()} with the feasibility constraint")
     for algo, p in tp.searches.items():
@@ -141,7 +141,7 @@ def print_tuned_plan(tp: TunedPlan) -> None:
         print(f"  {algo:>10}: {_budget_text((n, seeds, steps))} = {n * seeds * steps:,} env steps, "
               f"~{p.estimated_cpu_h:.2f} CPU-hours (its speed), search over {', '.join(p.sweep.search)}")
     print(f"  then: each algorithm's best {t.top} beside its default on {t.confirm_seeds} fresh seeds "
-          f"(from {max(first.seeds) + 1}), all in one confirmation '{tp.name}-{CONFIRM}'")
+          f"({seeds_text(fresh_of(tp))}: sweeps/seeds.py), all in one confirmation '{tp.name}-{CONFIRM}'")
     from sweeps.tuned_registry import destination
 
     where, why = destination(tp)
@@ -150,21 +150,26 @@ def print_tuned_plan(tp: TunedPlan) -> None:
           flush=True)
 
 
+def fresh_of(tp: TunedPlan) -> tuple[int, ...]:
+    """The confirmation's fresh seeds: none of their random streams any search's seeds drew from
+    (sweeps/seeds.py)."""
+    return fresh_seeds({s for p in tp.searches.values() for s in p.seeds}, tp.sweep.tune.confirm_seeds)
+
+
 def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
     """One sweep of every algorithm's winners (``ALGO-tunedK``) and default (``ALGO-default``) on the
-    fresh seeds after the searches' largest, at the same budget."""
+    fresh seeds (:func:`fresh_of`), at the same budget."""
     groups = {}
     for algo, tops in winners.items():
         own = dict(tp.searches[algo].sweep.set)  # the sweep's set and its groups' (a table's preset)
         for k, w in enumerate(tops, 1):
             groups[f"{algo}-{TUNED}{k}"] = {"set": {**own, "algo": algo, **w["fields"]}}
         groups[f"{algo}-{DEFAULT}"] = {"set": {**own, "algo": algo}}
-    first = next(iter(tp.searches.values()))
     data = tp.sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name",
                                                             "seeds", "searcher", "num_samples", "description", "set"})
     data["task"] = [tp.task]
     return SweepFile.model_validate({**data, "groups": groups, "name": f"{tp.name}-{CONFIRM}", "searcher": "grid",
-                                     "seeds": {"count": tp.sweep.tune.confirm_seeds, "start": max(first.seeds) + 1},
+                                     "seeds": {"list": fresh_of(tp)},
                                      "description": f"confirmation of {tp.name}: each algorithm tuned and default"})
 
 

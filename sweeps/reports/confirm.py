@@ -122,7 +122,9 @@ def _stats(r: dict) -> dict:
 def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str, baselines: tuple[str, ...] = ()):
     """The confirmation sweep: one group per winner (its fields as the group's ``set``), the
     default and the ``baselines`` the sweep ran (each algorithm's own defaults, group
-    ``baseline-ALGO``), on ``seeds`` seeds after the sweep's largest, at ``budget``."""
+    ``baseline-ALGO``), on ``seeds`` fresh seeds (sweeps/seeds.py: no env, global or evaluation
+    stream of the sweep's seeds), at ``budget``."""
+    from sweeps.seeds import fresh_seeds
     from sweeps.sweep_file import SweepFile
 
     # A sweep of several algorithms (``algo: [...]``): each winner names its own, and there is no one default.
@@ -133,7 +135,7 @@ def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str, bas
                                                           "num_samples", "name", "seeds", "budget",
                                                           *(("algo",) if several else ())})
     return SweepFile.model_validate({**data, "groups": groups, "budget": budget, "name": name,
-                                     "seeds": {"count": seeds, "start": max(sweep.seed_list()) + 1},
+                                     "seeds": {"list": fresh_seeds(sweep.seed_list(), seeds)},
                                      "searcher": "grid", "description": f"confirmation of {sweep.name}"})
 
 

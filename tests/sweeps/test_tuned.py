@@ -157,7 +157,7 @@ def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_ses
     for algo in ("lac", "ppo_lag"):
         path, = (registry / "lac/PointHazard-v0" / algo).glob("smoke-b2-*.yaml")  # kept by budget, limit, env
         entry = yaml.safe_load(path.read_text())
-        assert entry["fresh_seeds"] == [1, 2] and entry["search_seeds"] == [0] and entry["fresh"]["n_seeds"] == 2
+        assert entry["fresh_seeds"] == [1000, 2000] and entry["search_seeds"] == [0] and entry["fresh"]["n_seeds"] == 2
         # The verdict: the tuned configuration only where the paired test showed it better.
         assert entry["verdict"] in ("improved", "default-stands") and entry["mlflow"]["confirmation_run"]
         assert set(entry["config"] if entry["verdict"] == "improved" else entry["candidate"]) == set(search_space(algo))

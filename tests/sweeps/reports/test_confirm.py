@@ -43,7 +43,7 @@ def test_held_up_compares_the_confirmed_mean_with_the_search_interval():
 @pytest.mark.slow
 def test_a_smoke_search_then_its_confirmation_on_fresh_seeds(ray_session, tmp_path, monkeypatch, capsys):
     """End to end: 3 sampled configurations x 2 seeds (0, 1), then the best by the lower bound
-    beside the default on seeds 2, 3; the confirmation's note gives the verdict."""
+    beside the default on fresh seeds 2000, 3000 (sweeps/seeds.py); the confirmation's note gives the verdict."""
     monkeypatch.chdir(tmp_path)
     (tmp_path / "s.yaml").write_text(
         "task: lac/PointHazard-v0\nbudget: smoke\nseeds: 2\nnum_samples: 3\nsearcher: random\n"
@@ -61,7 +61,7 @@ def test_a_smoke_search_then_its_confirmation_on_fresh_seeds(ray_session, tmp_pa
     children = lambda p: [r for r in runs if r.data.tags.get("mlflow.parentRunId") == p.info.run_id]  # noqa: E731
     assert sorted({int(c.data.params["seed"]) for c in children(search)}) == [0, 1]
     confirmed = children(confirmation)
-    assert sorted({int(c.data.params["seed"]) for c in confirmed}) == [2, 3]  # disjoint from the search's
+    assert sorted({int(c.data.params["seed"]) for c in confirmed}) == [2000, 3000]  # no stream of the search's
     assert sorted(c.data.params["group"] for c in confirmed) == ["default", "default", "top1", "top1"]
     # top1 is the search's configuration with the best lower bound of its return interval.
     summary = pd.read_csv(client.download_artifacts(search.info.run_id, "summary/summary.csv", str(tmp_path)))
@@ -80,7 +80,8 @@ def test_the_confirmation_reruns_the_winners_the_default_and_the_baselines_on_fr
                                       "  T: {grid: {langevin_steps: [5, 9]}}\n")
     top = [{"group": "top1", "config": "T-langevin_steps=9", "fields": {"langevin_steps": 9}, "search": {}}]
     c = confirm.confirmation_file(sweep, top, 3, "quick", "x-confirm", baselines=("ppo_lag",))
-    assert c.seed_list() == (7, 8, 9) and c.budget == "quick" and c.name == "x-confirm"
+    # fresh in every stream: 1,000 apart, from the first multiple at least 1,000 past the largest (sweeps/seeds.py)
+    assert c.seed_list() == (2000, 3000, 4000) and c.budget == "quick" and c.name == "x-confirm"
     assert {g: dict(grp.set) for g, grp in c.groups.items()} == {
         "top1": {"langevin_steps": 9}, "default": {}, "baseline-ppo_lag": {"algo": "ppo_lag"}}
     assert confirm.varied_fields(sweep) == ["algo", "langevin_steps"]
