@@ -13,9 +13,20 @@ INFEASIBLE_OFFSET = 1e6
 OBJECTIVE, CONSTRAINT, WALL_TIME_S = "objective", "constraint", "wall_time_s"
 
 
+def feasible(cost, limit):
+    """The one feasibility rule, per seed: a run is feasible when its final episode cost is within its
+    limit (cost ≤ limit; a NaN on either side is not). Scalars or numpy arrays alike; every verdict of
+    the reports reads it through sweeps/reports/verdicts.py."""
+    import numpy as np
+
+    with np.errstate(invalid="ignore"):
+        out = np.less_equal(cost, limit)
+    return bool(out) if np.ndim(out) == 0 else out
+
+
 def objective(ret: float, cost: float, limit: float) -> float:
     """One scalar for Tune/ASHA/Optuna: feasible trials rank by return; every infeasible trial
     ranks below every feasible one (−10⁶ − violation), and less violation ranks higher."""
     if math.isnan(ret) or math.isnan(cost):
         return -2 * INFEASIBLE_OFFSET
-    return ret if cost <= limit else -INFEASIBLE_OFFSET - (cost - limit)
+    return ret if feasible(cost, limit) else -INFEASIBLE_OFFSET - (cost - limit)

@@ -174,11 +174,11 @@ def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
 
 
 def pick_winners(summary, fields_of: dict, k: int) -> list[dict]:
-    """A search's ``k`` best configurations: the mean-feasible ones by the lower end of their return
-    interval (then the mean), else, where none is feasible, the least costly: every algorithm has a
-    tuned configuration to confirm (it may fail to hold up)."""
+    """A search's ``k`` best configurations: the feasible ones (sweeps/reports/verdicts.py's rule) by
+    the lower end of their return interval (then the mean), else, where none is feasible, the least
+    costly: every algorithm has a tuned configuration to confirm (it may fail to hold up)."""
     done = summary[summary["n_seeds"] > 0]
-    ok = done[done["mean_feasible"].astype(bool)]
+    ok = done[done["feasible"].astype(bool)]
     if len(ok):
         key = ok["return_mean_ci_low"].fillna(-math.inf)
         order = ok.assign(_k=key).sort_values(["_k", "return_mean"], ascending=False)
@@ -226,7 +226,7 @@ def run_tuned(tp: TunedPlan, run_locked) -> int:
         trials, summary = search_results(plan)
         fields_of = {r["config"]: {f: r[f] for f in plan.sweep.search if f in r} for r in trials.to_dict("records")}
         winners[algo] = pick_winners(summary, fields_of, tp.sweep.tune.top)
-        searched[algo] = (trials, summary)
+        searched[algo] = (trials, summary, plan.timesteps)
         if not winners[algo]:
             print(f"tune: {algo}'s search finished no configuration; nothing to confirm", flush=True)
             return 1

@@ -39,11 +39,11 @@ def varied_fields(sweep) -> list[str]:
 
 
 def rank(summary: pd.DataFrame, k: int) -> pd.DataFrame:
-    """The ``k`` best mean-feasible configurations that are not the default, by the lower end of
-    their return interval (then the mean: one seed has no interval)."""
+    """The ``k`` best feasible configurations (sweeps/reports/verdicts.py's rule) that are not the
+    default, by the lower end of their return interval (then the mean: one seed has no interval)."""
     from sweeps.reports.ladder import FRONTIER_GROUP
 
-    ok = summary[summary["mean_feasible"].astype(bool) & summary["return_mean"].notna() & ~summary["is_default"]
+    ok = summary[summary["feasible"].astype(bool) & summary["return_mean"].notna() & ~summary["is_default"]
                  & ~summary["group"].astype(str).eq(FRONTIER_GROUP)]  # a fixed-ν run is the yardstick, not a candidate
     key = ok["return_mean_ci_low"].fillna(-math.inf)
     return ok.assign(_low=key).sort_values(["_low", "return_mean"], ascending=False).head(k).drop(columns="_low")
@@ -77,7 +77,10 @@ def regret_winners(trials: pd.DataFrame, fields_of: dict[str, dict], k: int, by:
     summary = ladder.wins(table).set_index("configuration")
     configs = ladder.configs_by_label(trials)
     out = []
-    for name in ladder.choose(table, k, by.removesuffix("-regret")):
+    chosen, notes = ladder.choose(table, k, by.removesuffix("-regret"))
+    for note in notes:  # said, never a silent empty confirmation
+        print(f"confirmation: {note}", flush=True)
+    for name in chosen:
         config = configs[name][0]
         out.append({"group": f"{TOP}{len(out) + 1}", "config": config, "fields": fields_of.get(config, {}),
                     "search": {"worst_regret": _plain(summary.loc[name, "worst_regret"]),
@@ -144,7 +147,7 @@ def held_up(search: dict, confirmed: dict) -> bool:
     (its mean where it had one seed) and its confirmed mean cost stays within the limit."""
     low = search.get("return_mean_ci_low")
     low = search["return_mean"] if low is None or (isinstance(low, float) and math.isnan(low)) else low
-    return bool(confirmed.get("mean_feasible")) and confirmed.get("return_mean", -math.inf) >= low
+    return bool(confirmed.get("feasible")) and confirmed.get("return_mean", -math.inf) >= low
 
 
 def confirmation_markdown(top: list[dict], summary: pd.DataFrame, trials: pd.DataFrame | None = None) -> str:

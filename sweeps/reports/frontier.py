@@ -1,7 +1,7 @@
 """The reward-cost frontier of a sweep: which configurations are worth having.
 
-A configuration (a row of ``sweeps.reports.report.summarize``) is *feasible* when its mean final cost is
-within the limit (cost_mean <= cost_limit) and *on the frontier* when it is feasible and no other
+A configuration (a row of ``sweeps.reports.report.summarize``) is *feasible* by the one rule of
+sweeps/reports/verdicts.py (its ``feasible`` column: ≥ 80% of its seeds within the limit) and *on the frontier* when it is feasible and no other
 feasible configuration of the same task has a return at least as high and a cost at least as low,
 with one of the two strictly better. Two configurations with the same return and cost do not
 dominate each other: both stay on the frontier. A configuration without finished seeds (NaN
@@ -55,11 +55,18 @@ def _non_dominated(ret: np.ndarray, cost: np.ndarray) -> np.ndarray:
     return ~(geq & leq & strict).any(axis=1)
 
 
+def _feasible(points: pd.DataFrame) -> np.ndarray:
+    """The summary's verdict per row (its ``feasible`` column, sweeps/reports/verdicts.py)."""
+    if "feasible" not in points:
+        raise ValueError("frontier points need the summary's 'feasible' column (sweeps/reports/verdicts.py's rule)")
+    return points["feasible"].astype(bool).to_numpy()
+
+
 def frontier(points: pd.DataFrame) -> pd.Series:
     """Boolean Series on ``points.index``: feasible and non-dominated within its task (see the module
     docstring; a frame without a ``task`` column is one task)."""
     ret, cost, limit = (_num(points, c) for c in ("return_mean", "cost_mean", "cost_limit"))
-    ok = np.isfinite(ret) & np.isfinite(cost) & np.isfinite(limit) & (cost <= limit)
+    ok = np.isfinite(ret) & np.isfinite(cost) & np.isfinite(limit) & _feasible(points)
     tasks = points["task"].astype(str).to_numpy() if "task" in points else np.zeros(len(points), str)
     on = np.zeros(len(points), bool)
     for task in np.unique(tasks[ok]):
@@ -140,7 +147,7 @@ def frontier_png(summary: pd.DataFrame, path) -> str | None:
             if has.any():
                 ax.errorbar(cost[has], ret[has], fmt="none", ecolor="0.55", elinewidth=1, capsize=3,
                             **{f"{axis}err": err[:, has]})
-        feasible = cost <= _num(g, "cost_limit")  # False where the limit is NaN
+        feasible = _feasible(g)
         for algo, colour in colours.items():
             m = (g["algo_"] == algo).to_numpy()
             if not m.any():
@@ -258,7 +265,7 @@ def frontier_figure(summary: pd.DataFrame):
             s = g[g["algo_"] == algo]
             if s.empty:
                 continue
-            feasible = _num(s, "cost_mean") <= _num(s, "cost_limit")
+            feasible = _feasible(s)
             fig.add_trace(go.Scatter(
                 x=s["cost_mean"], y=s["return_mean"], mode="markers", error_x=bars(s, "cost"),
                 error_y=bars(s, "return"), hovertext=[_hover(r) for r in s.to_dict("records")], hoverinfo="text",

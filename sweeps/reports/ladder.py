@@ -4,17 +4,21 @@ Spoor et al. ("Lagrangian methods in safe RL", 2026) show that a verdict at one 
 reverse at another, and that automatic multiplier updates are never compared with the empirical
 optimum: the return-cost front traced by runs at fixed multipliers. Per task, from the trials of a
 ladder sweep (``cost_limits``: each configuration × limit × seed a trial) and, where it ran, its
-frontier (``frontier``: an algorithm at fixed ν values, group ``frontier``):
+frontier (``frontier``: an algorithm at fixed ν values, group ``frontier``), every verdict decided
+by sweeps/reports/verdicts.py:
 
-- the frontier's points: per fixed ν, the mean return and mean cost over its seeds, the return's
-  interval; R*(b) = the best mean return among the points with mean cost ≤ b, with that point's
-  interval (NaN where no point is within b);
-- per configuration and limit: its return with its interval, P(feasible) over its seeds (Wilson),
-  its regret R*(b) − R(b) (its interval from both ends: R*'s low minus R's high, and so on), its
-  rank at b: the configurations within b by mean cost, by return, then the others by cost;
-- where the ranking changes between consecutive limits, and each configuration's wins: first at k
-  of the n limits;
-- the worst and the mean regret over the ladder, by which confirmation may choose its winners.
+- the frontier's points: per fixed ν, its seeds' mean return (with its interval) and mean cost;
+  R*(b): the ν of the best return among those feasible within b on half the frontier's seeds,
+  measured on the other half (so choosing the best of noisy points does not flatter it); which
+  algorithm's frontier it is;
+- per configuration and limit: its return with its interval, its feasible seeds and P(feasible)
+  (Wilson), feasible or not by the one rule; its regret R*(b) − R(b) with its interval where it is
+  feasible, its mean violation where it is not (an infeasible row has no regret); its rank at b,
+  ties where the return intervals overlap;
+- where the ranking changes between consecutive limits, and each configuration's wins: first
+  (ties included) at k of the n limits;
+- the worst and the mean regret over the ladder, defined for configurations feasible at every
+  limit: by them a confirmation may choose its winners, never an infeasible one.
 
 Tasks are never ranked together: every table is per task.
 """
@@ -27,9 +31,8 @@ import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN
+from sweeps.reports import verdicts
 from sweeps.reports.configurations import fmt_num, fmt_value, is_na, metric_name, prepared, text_column
-from sweeps.reports.safety import wilson_interval
-from sweeps.reports.stats import interval
 
 #: The group of a sweep's fixed-multiplier runs, and the field they fix.
 FRONTIER_GROUP, FRONTIER_FIELD = "frontier", "nu_fixed"
@@ -49,64 +52,63 @@ def _scored(trials: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def frontier_points(trials: pd.DataFrame) -> pd.DataFrame:
-    """Per task and fixed ν: seeds, mean return (with its interval) and mean cost."""
+def frontier_seeds(trials: pd.DataFrame) -> pd.DataFrame:
+    """The frontier's runs, one row per seed: task, algo, nu, seed, return, cost."""
     df = _scored(trials)
     df = df[df["group"].astype(str).eq(FRONTIER_GROUP)]
+    out = pd.DataFrame({"task": df["task"], "algo": df["algo"], "nu": df["value"],
+                        "seed": pd.to_numeric(df["seed"], errors="coerce") if "seed" in df else np.nan,
+                        "return": df[EPISODE_RETURN], "cost": df[EPISODE_COST]})
+    return out.reset_index(drop=True)
+
+
+def frontier_points(trials: pd.DataFrame) -> pd.DataFrame:
+    """Per task and fixed ν: seeds, mean return (with its interval) and mean cost."""
     rows = []
-    for (task, algo, nu), g in df.groupby(["task", "algo", "value"], sort=False):
-        ret, ret_low, ret_high = interval(g[EPISODE_RETURN])
+    for (task, algo, nu), g in frontier_seeds(trials).groupby(["task", "algo", "nu"], sort=False):
+        ret, ret_low, ret_high = verdicts.mean_interval(g["return"])
         rows.append({"task": task, "algo": algo, "nu": nu, "n_seeds": len(g), "return_mean": ret,
-                     "return_low": ret_low, "return_high": ret_high, "cost_mean": g[EPISODE_COST].mean()})
+                     "return_low": ret_low, "return_high": ret_high, "cost_mean": g["cost"].mean()})
     return pd.DataFrame(rows, columns=["task", "algo", "nu", "n_seeds", "return_mean", "return_low", "return_high",
                                        "cost_mean"])
 
 
-def best_within(points: pd.DataFrame, limit: float) -> dict:
-    """R*(b): the point of the best mean return among those with mean cost ≤ ``limit``."""
-    inside = points[points["cost_mean"] <= limit]
-    if inside.empty:
-        return {"r_star": math.nan, "r_star_low": math.nan, "r_star_high": math.nan, "r_star_nu": ""}
-    best = inside.loc[inside["return_mean"].idxmax()]
-    return {"r_star": best["return_mean"], "r_star_low": best["return_low"], "r_star_high": best["return_high"],
-            "r_star_nu": best["nu"]}
-
-
-def rank_at_limit(rows: pd.DataFrame) -> pd.Series:
-    """1 = best: within the limit by mean cost first (by return, high first), then the others (by
-    cost, low first); ties share the order they come in."""
-    within = rows["cost_mean"] <= rows[COST_LIMIT]
-    key = pd.DataFrame({"out": ~within, "by": np.where(within, -rows["return_mean"], rows["cost_mean"])},
-                       index=rows.index)
-    order = key.sort_values(["out", "by"], kind="stable").index
-    return pd.Series(range(1, len(order) + 1), index=order).reindex(rows.index)
+def best_within(seeds: pd.DataFrame, limit: float) -> dict:
+    """R*(b) of one task's frontier (:func:`frontier_seeds` rows): sweeps/reports/verdicts.py."""
+    star = verdicts.best_within(seeds, limit)
+    star["r_star_algo"] = ", ".join(sorted(set(seeds["algo"]))) if len(seeds) else ""
+    return star
 
 
 def ladder_table(trials: pd.DataFrame) -> pd.DataFrame:
     """One row per task, configuration and limit (the frontier's runs aside): the module
     docstring's figures."""
     df = _scored(trials)
-    points = frontier_points(trials)
+    seeds = frontier_seeds(trials)
     df = df[~df["group"].astype(str).eq(FRONTIER_GROUP)]
     rows = []
     for key, g in df.groupby([*CONFIG_KEYS, COST_LIMIT], sort=False):
         limit = float(key[-1])
-        ret, ret_low, ret_high = interval(g[EPISODE_RETURN])
-        n, k = len(g), int((g[EPISODE_COST] <= limit).sum())
-        p, p_low, p_high = wilson_interval(k, n)
-        star = best_within(points[points["task"] == key[0]], limit)
-        rows.append({**dict(zip([*CONFIG_KEYS, COST_LIMIT], key)), "n_seeds": n, "return_mean": ret,
-                     "return_low": ret_low, "return_high": ret_high, "cost_mean": g[EPISODE_COST].mean(),
-                     "p_feasible": p, "p_feasible_low": p_low, "p_feasible_high": p_high, **star,
-                     "regret": star["r_star"] - ret, "regret_low": star["r_star_low"] - ret_high,
-                     "regret_high": star["r_star_high"] - ret_low})
+        v = verdicts.verdict(g[EPISODE_RETURN], g[EPISODE_COST], limit)
+        star = best_within(seeds[seeds["task"] == key[0]], limit)
+        reg = verdicts.regret(star, g[EPISODE_RETURN], v["feasible"])
+        rows.append({**dict(zip([*CONFIG_KEYS, COST_LIMIT], key)), "n_seeds": v["n_seeds"],
+                     "return_mean": v["return"][0], "return_low": v["return"][1], "return_high": v["return"][2],
+                     "cost_mean": v["cost"][0], "n_feasible": v["n_feasible"], "p_feasible": v["p_feasible"][0],
+                     "p_feasible_low": v["p_feasible"][1], "p_feasible_high": v["p_feasible"][2],
+                     "feasible": v["feasible"], "violation": v["violation"], "r_star": star["r_star"],
+                     "r_star_nu": star["r_star_nu"], "r_star_seeds": len(star["r_star_scores"]),
+                     "r_star_algo": star["r_star_algo"], "r_star_why": star["why"],
+                     "regret": reg[0], "regret_low": reg[1], "regret_high": reg[2]})
     table = pd.DataFrame(rows)
     if table.empty:
         return table
     table["rank"] = 0
     for _, g in table.groupby(["task", COST_LIMIT], sort=False):
-        table.loc[g.index, "rank"] = rank_at_limit(g)
-    return table.sort_values(["task", COST_LIMIT, "rank"], kind="stable").reset_index(drop=True)
+        table.loc[g.index, "rank"] = verdicts.rank_table(g)
+    table = table.assign(_label=table.apply(label, axis=1))
+    return (table.sort_values(["task", COST_LIMIT, "rank", "_label"], kind="stable").drop(columns="_label")
+            .reset_index(drop=True))
 
 
 def label(row) -> str:
@@ -118,27 +120,48 @@ def label(row) -> str:
 
 
 def wins(table: pd.DataFrame) -> pd.DataFrame:
-    """Per task and configuration: first at k of the n limits, and the worst and mean regret over them."""
+    """Per task and configuration: first (ties included) at k of the n limits, feasible at how many,
+    and the worst and mean regret over the ladder: defined only where the configuration is feasible
+    at every limit and R*(b) exists at each (``why`` says which limit it fails where not)."""
     rows = []
     for (task, name), g in table.assign(name=table.apply(label, axis=1)).groupby(["task", "name"], sort=False):
         regret = g["regret"].to_numpy(dtype=float)
+        over = [fmt_value(b) for b, ok in zip(g[COST_LIMIT], g["feasible"]) if not ok]
+        no_star = [fmt_value(b) for b, r in zip(g[COST_LIMIT], g["r_star"]) if not np.isfinite(r)]
+        why = (f"infeasible at b = {', '.join(over)}" if over else
+               f"no R*(b) at b = {', '.join(no_star)}" if no_star else "")
+        defined = not why and len(regret) and np.isfinite(regret).all()
         rows.append({"task": task, "configuration": name, "wins": int((g["rank"] == 1).sum()),
-                     "limits": g[COST_LIMIT].nunique(),
-                     "worst_regret": float(np.max(regret)) if np.isfinite(regret).all() and len(regret) else math.nan,
-                     "mean_regret": float(np.mean(regret)) if np.isfinite(regret).all() and len(regret) else math.nan})
-    return pd.DataFrame(rows, columns=["task", "configuration", "wins", "limits", "worst_regret", "mean_regret"])
+                     "feasible_at": int(g["feasible"].astype(bool).sum()), "limits": g[COST_LIMIT].nunique(),
+                     "worst_regret": float(np.max(regret)) if defined else math.nan,
+                     "mean_regret": float(np.mean(regret)) if defined else math.nan, "why": why})
+    return pd.DataFrame(rows, columns=["task", "configuration", "wins", "feasible_at", "limits", "worst_regret",
+                                       "mean_regret", "why"])
+
+
+def flat_frontier(table: pd.DataFrame) -> list[str]:
+    """One line per pair of consecutive limits whose R*(b) is the same fixed ν: there the frontier's
+    grid has no point between them, so the two rungs test the same yardstick (add ν values whose
+    cost falls between the limits)."""
+    rungs = table.drop_duplicates(COST_LIMIT).sort_values(COST_LIMIT)
+    lines = []
+    for (b0, nu0), (b1, nu1) in zip(zip(rungs[COST_LIMIT], rungs["r_star_nu"]),
+                                    list(zip(rungs[COST_LIMIT], rungs["r_star_nu"]))[1:]):
+        if nu0 != "" and nu0 == nu1:
+            lines.append(f"- R*(b) is the same point (ν = {nu0}) at b = {fmt_value(b0)} and {fmt_value(b1)}: the "
+                         "frontier has no ν between them")
+    return lines
 
 
 def ranking_changes(table: pd.DataFrame) -> list[str]:
-    """One line per pair of consecutive limits of a task whose ranking differs."""
+    """One line per pair of consecutive limits of a task whose ranking differs (ties as ``=``)."""
     lines = []
     for task, t in table.groupby("task", sort=False):
-        orders = [(b, [label(r) for _, r in g.sort_values("rank").iterrows()])
+        orders = [(b, verdicts.ordered_with_ties([label(r) for _, r in g.iterrows()], g["rank"].tolist()))
                   for b, g in t.groupby(COST_LIMIT, sort=True)]
         for (b0, o0), (b1, o1) in zip(orders, orders[1:]):
             if o0 != o1:
-                lines.append(f"{task}: b = {fmt_value(b0)} → {fmt_value(b1)}: {' > '.join(o0)} becomes "
-                             f"{' > '.join(o1)}")
+                lines.append(f"{task}: b = {fmt_value(b0)} → {fmt_value(b1)}: {o0} becomes {o1}")
     return lines
 
 
@@ -155,12 +178,20 @@ def configs_by_label(trials: pd.DataFrame) -> dict[str, list[str]]:
     return out
 
 
-def choose(table: pd.DataFrame, k: int, by: str = "worst") -> list[str]:
-    """The ``k`` configurations of least ``by`` regret over the ladder (``by``: worst | mean), per task."""
+def choose(table: pd.DataFrame, k: int, by: str = "worst") -> tuple[list[str], list[str]]:
+    """The ``k`` configurations of least ``by`` regret over the ladder (``by``: worst | mean), per task,
+    among those feasible at every limit; and one line per task where none qualifies (never a silent
+    empty choice)."""
     if by not in REGRET_CHOICES:
         raise ValueError(f"regret choice {by!r}; accepted: {' | '.join(REGRET_CHOICES)}")
-    w = wins(table).dropna(subset=[f"{by}_regret"])
-    return [c for _, g in w.groupby("task", sort=False) for c in g.nsmallest(k, f"{by}_regret")["configuration"]]
+    chosen, notes = [], []
+    for task, g in wins(table).groupby("task", sort=False):
+        ok = g.dropna(subset=[f"{by}_regret"])
+        chosen += list(ok.nsmallest(k, f"{by}_regret")["configuration"])
+        if ok.empty:
+            reasons = "; ".join(f"{r.configuration}: {r.why}" for r in g.itertuples())
+            notes.append(f"{task}: no configuration has a {by} regret to choose by ({reasons})")
+    return chosen, notes
 
 
 def _ci(point, low, high) -> str:
@@ -169,26 +200,55 @@ def _ci(point, low, high) -> str:
     return fmt_num(point) if is_na(low) else f"{fmt_num(point)} [{fmt_num(low)}, {fmt_num(high)}]"
 
 
+def _regret_cell(r) -> str:
+    if not r["feasible"]:
+        return f"infeasible (over by {fmt_num(r['violation'])})"
+    if is_na(r["regret"]):
+        return "– (no R*)"
+    return _ci(r["regret"], r["regret_low"], r["regret_high"])
+
+
+def _rank_cell(r, ranks) -> str:
+    return f"{int(r['rank'])}=" if (ranks == r["rank"]).sum() > 1 else str(int(r["rank"]))
+
+
+def methods_lines() -> list[str]:
+    """What each interval of the ladder's tables is (sweeps/reports/verdicts.py)."""
+    m = verdicts.METHODS
+    return [f"Feasible: at least {verdicts.FEASIBLE_SHARE:.0%} of a row's seeds end with cost ≤ b (the "
+            "objective's rule, per seed); ranks: feasible rows by return, then the others by feasible seeds and "
+            "violation; `=`: a tie (return intervals overlap).",
+            f"Intervals: return, {m['mean']}; P(feasible), {m['proportion']}; regret, {m['regret']}."]
+
+
 def ladder_markdown(table: pd.DataFrame) -> str:
     """The per-limit tables, the wins and worst regrets, and where the ranking changes."""
     if table.empty:
         return ""
-    out = ["## Across the ladder of cost limits", ""]
+    out = ["## Across the ladder of cost limits", "", *methods_lines(), ""]
     for task, t in table.groupby("task", sort=False):
-        out += [f"### {task}", "", "| b | rank | configuration | seeds | return [95% CI] | cost | P(feasible) "
-                "[Wilson] | R*(b) (ν) | regret [CI] |", "|---|---|---|---|---|---|---|---|---|"]
+        algo = next((a for a in t["r_star_algo"] if a), "")
+        whose = (f"R*(b): {algo}'s fixed-ν frontier (its ν chosen on half its seeds, R* measured on the rest); "
+                 "for the other algorithms' rows it is that algorithm's frontier, not their own.") if algo else \
+            "No frontier ran: no R*(b), no regret."
+        out += [f"### {task}", "", whose, "", "| b | rank | configuration | seeds | return [95%] | cost | feasible "
+                "seeds | P(feasible) [Wilson] | R*(b) (ν, seeds) | regret [95%] |", "|---|---|---|---|---|---|---|---|---|---|"]
         for _, r in t.iterrows():
-            star = "–" if is_na(r["r_star"]) else f"{fmt_num(r['r_star'])} (ν={r['r_star_nu']})"
-            out.append(f"| {fmt_value(r[COST_LIMIT])} | {int(r['rank'])} | {label(r)} | {int(r['n_seeds'])} | "
+            ranks = t.loc[t[COST_LIMIT] == r[COST_LIMIT], "rank"]
+            star = (f"– ({r['r_star_why']})" if is_na(r["r_star"]) else
+                    f"{fmt_num(r['r_star'])} (ν={r['r_star_nu']}, {int(r['r_star_seeds'])})")
+            out.append(f"| {fmt_value(r[COST_LIMIT])} | {_rank_cell(r, ranks)} | {label(r)} | {int(r['n_seeds'])} | "
                        f"{_ci(r['return_mean'], r['return_low'], r['return_high'])} | {fmt_num(r['cost_mean'])} | "
+                       f"{int(r['n_feasible'])}/{int(r['n_seeds'])} | "
                        f"{_ci(r['p_feasible'], r['p_feasible_low'], r['p_feasible_high'])} | {star} | "
-                       f"{_ci(r['regret'], r['regret_low'], r['regret_high'])} |")
+                       f"{_regret_cell(r)} |")
         w = wins(t)
-        out += ["", "| configuration | first at | worst regret | mean regret |", "|---|---|---|---|"]
-        out += [f"| {r.configuration} | {r.wins} of {r.limits} | {fmt_num(r.worst_regret)} | {fmt_num(r.mean_regret)} |"
+        out += ["", "| configuration | first at | feasible at | worst regret | mean regret |", "|---|---|---|---|---|"]
+        out += [f"| {r.configuration} | {r.wins} of {r.limits} | {r.feasible_at} of {r.limits} | "
+                f"{fmt_num(r.worst_regret) if r.why == '' else '– (' + r.why + ')'} | {fmt_num(r.mean_regret)} |"
                 for r in w.itertuples()]
         changes = [f"- ranking changes at {c.split(': ', 1)[1]}" for c in ranking_changes(t)]
-        out += ["", *(changes or ["- the ranking is the same at every limit"]), ""]
+        out += ["", *(changes or ["- the ranking is the same at every limit"]), *flat_frontier(t), ""]
     return "\n".join(out)
 
 
@@ -212,7 +272,7 @@ def ladder_png(table: pd.DataFrame, points: pd.DataFrame, path) -> str | None:
             axes[0, j].errorbar(g[COST_LIMIT], g["return_mean"], yerr=[g["return_mean"] - g["return_low"],
                                 g["return_high"] - g["return_mean"]], marker="o", capsize=3, label=name)
             axes[1, j].plot(g[COST_LIMIT], g["cost_mean"], marker="o", label=name)
-        star = [best_within(points[points["task"] == task], b)["r_star"] for b in limits]
+        star = [best_within(points[points["task"] == task], b)["r_star"] for b in limits]  # per-seed points
         if np.isfinite(star).any():
             axes[0, j].step(limits, star, where="post", color="black", linestyle="--", label="R*(b), fixed ν")
         axes[1, j].plot(limits, limits, color="grey", linestyle=":", label="cost = b")
@@ -256,12 +316,11 @@ def write_ladder_report(trials: pd.DataFrame, out_dir) -> tuple[str, dict[str, f
 
     out = Path(out_dir)
     table = ladder_table(trials)
-    points = frontier_points(trials)
+    frontier_points(trials).to_csv(out / "frontier_points.csv", index=False)
     table.to_csv(out / "ladder.csv", index=False)
-    points.to_csv(out / "frontier_points.csv", index=False)
     text = ladder_markdown(table)
     (out / "ladder.md").write_text(text + "\n", encoding="utf-8")
-    ladder_png(table, points, out / "ladder.png")
+    ladder_png(table, frontier_seeds(trials), out / "ladder.png")
     return text, parent_metrics(table) if not table.empty else {}
 
 

@@ -37,11 +37,11 @@ from sweeps.reports.configurations import is_na as _is_na  # noqa: E402
 from sweeps.reports.configurations import metric_name as _metric_name  # noqa: E402
 from sweeps.reports.configurations import prepared as _prepared  # noqa: E402
 from sweeps.reports.configurations import value_key as _value_key  # noqa: E402
-from sweeps.reports.stats import STAT_COLUMNS, seed_statistics, seeds_line  # noqa: E402
+from sweeps.reports.verdicts import STAT_COLUMNS, configuration_feasible, seed_statistics, seeds_line  # noqa: E402
 from sweeps.score import EVAL_COST, EVAL_RETURN, TRAIN_COST, TRAIN_RETURN, described  # noqa: E402
 
 STATS = ["n_seeds", "n_failed", "n_stopped", "return_mean", "return_std", "cost_mean", "cost_std",
-         "cost_limit", "feasible_fraction", "mean_feasible", "objective_mean", "is_default",
+         "cost_limit", "feasible_fraction", "feasible", "objective_mean", "is_default",
          *STAT_COLUMNS, "n_eval_scored", *(f"{c}_mean" for c in (TRAIN_RETURN, TRAIN_COST, EVAL_RETURN, EVAL_COST))]
 
 
@@ -67,7 +67,7 @@ def summarize(trials: pd.DataFrame) -> pd.DataFrame:
             return_mean=ret.mean(), return_std=ret.std(ddof=1),
             cost_mean=cost.mean(), cost_std=cost.std(ddof=1), cost_limit=limit,
             feasible_fraction=pd.to_numeric(ok[FEASIBLE], errors="coerce").mean(),
-            mean_feasible=bool(cost.mean() <= limit),  # False when either side is NaN
+            feasible=configuration_feasible(cost[ret.notna()], limit),  # the one rule (verdicts.py)
             objective_mean=pd.to_numeric(ok["objective"], errors="coerce").mean(),
             is_default=bool(g["default"].any()),
             # What the seeds were ranked on (sweeps/score.py), and both scores' means beside.
@@ -90,8 +90,9 @@ def score_text(summary: pd.DataFrame) -> str:
 
 
 def best_configuration(summary: pd.DataFrame) -> dict | None:
-    """The mean-feasible configuration with the highest return_mean (JSON-ready dict), or None."""
-    ok = summary[summary["mean_feasible"].astype(bool) & summary["return_mean"].notna()]
+    """The feasible configuration (sweeps/reports/verdicts.py's rule) with the highest return_mean
+    (JSON-ready dict), or None."""
+    ok = summary[summary["feasible"].astype(bool) & summary["return_mean"].notna()]
     if ok.empty:
         return None
     row = ok.loc[ok["return_mean"].idxmax()]
@@ -106,12 +107,12 @@ PARENT_METRICS = ("best_feasible_return", "best_feasible_cost", "feasible_config
 
 def parent_metrics(summary: pd.DataFrame) -> dict[str, float]:
     """The parent run's metrics (:data:`PARENT_METRICS`) from the sweep's summary: the best
-    mean-feasible configuration's return and cost (left out when none is feasible, so a sweep
+    feasible configuration's return and cost (left out when none is feasible, so a sweep
     without one sorts last rather than at a made-up number), how many configurations are
     feasible, and the trials finished, stopped early and failed. A sweep over several tasks gets
     the best per task instead (``best_feasible_return/<task>``): returns of different tasks do
     not compare."""
-    out = {"feasible_configurations": float(summary["mean_feasible"].astype(bool).sum()),
+    out = {"feasible_configurations": float(summary["feasible"].astype(bool).sum()),
            "configurations": float(len(summary)),
            "trials_finished": float(summary["n_seeds"].sum()),
            "trials_stopped": float(summary["n_stopped"].sum()),
@@ -150,15 +151,15 @@ def _feasible(r: dict) -> str:
     return f"{n_ok}/{r['n_seeds']}"
 
 
-STAT_HEADER = ("return mean [95% CI] | return IQM [95% CI] | cost mean [95% CI] | cost IQM [95% CI] "
+STAT_HEADER = ("return mean [95%] | return IQM | cost mean [95%] | cost IQM "
                "| feasible seeds | P(return > default) | P(cost < default)")
 
 
 def _stat_cells(r: dict) -> list[str]:
     return [_ci(r["return_mean"], r["return_mean_ci_low"], r["return_mean_ci_high"]),
-            _ci(r["return_iqm"], r["return_iqm_ci_low"], r["return_iqm_ci_high"]),
+            _fmt_num(r["return_iqm"]),
             _ci(r["cost_mean"], r["cost_mean_ci_low"], r["cost_mean_ci_high"]),
-            _ci(r["cost_iqm"], r["cost_iqm_ci_low"], r["cost_iqm_ci_high"]),
+            _fmt_num(r["cost_iqm"]),
             _feasible(r), _poi(r["poi_return_vs_default"]), _poi(r["poi_cost_vs_default"])]
 
 
@@ -183,7 +184,7 @@ def markdown_table(summary: pd.DataFrame) -> str:
     lines += ["", f"Scores: {score_text(summary)}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
     lines += [comparison] if comparison else []
     lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
-                 "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)")
+                 "**Best feasible configuration:** none (no configuration has ≥ 80% of its seeds within the limit)")
     return "\n".join(lines) + "\n"
 
 
@@ -199,8 +200,8 @@ def algorithm_comparison(summary: pd.DataFrame) -> str:
     for task, g in rows.groupby("task", sort=False):
         lines = [f"**Algorithms on `{task}`** (final return and cost over seeds; limit "
                  f"{_fmt_num(g['cost_limit'].median())}):", "",
-                 "| algorithm | seeds | return mean [95% CI] | return IQM [95% CI] | cost mean [95% CI] | "
-                 "cost IQM [95% CI] | feasible seeds | P(LAC return > X) | P(LAC cost < X) |",
+                 "| algorithm | seeds | return mean [95%] | return IQM | cost mean [95%] | "
+                 "cost IQM | feasible seeds | P(LAC return > X) | P(LAC cost < X) |",
                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         order = {a: i for i, a in enumerate(ALGOS)}  # the registry's order, LAC first; a user's module after
         for r in sorted(g.to_dict("records"), key=lambda r: (order.get(r["value"], len(order)), str(r["value"]))):
@@ -208,9 +209,9 @@ def algorithm_comparison(summary: pd.DataFrame) -> str:
             beats = ["–", "–"] if lac else [_poi(1 - r[k]) if not _is_na(r[k]) else "–"
                                             for k in ("poi_return_vs_default", "poi_cost_vs_default")]
             lines.append("| " + " | ".join([str(r["value"]), _seeds(r), *_stat_cells(r)[:5], *beats]) + " |")
-        ok = g[g["mean_feasible"].astype(bool) & g["return_mean"].notna()]
+        ok = g[g["feasible"].astype(bool) & g["return_mean"].notna()]
         if ok.empty:
-            lines += ["", "**Best within the limit:** none (no algorithm's mean cost is within the limit)"]
+            lines += ["", "**Best within the limit:** none (no algorithm has ≥ 80% of its seeds within the limit)"]
         else:
             best = ok.loc[ok["return_mean"].idxmax()]
             lines += ["", f"**Best within the limit:** {best['value']}, return "
@@ -230,7 +231,7 @@ def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: 
     one_task = len(tasks) == 1
     best = best_configuration(summary)
     head = [heading, "", (f"**Best feasible configuration:** {_describe(best)}" if best else
-                          "**Best feasible configuration:** none (no configuration has mean cost ≤ limit)"), ""]
+                          "**Best feasible configuration:** none (no configuration has ≥ 80% of its seeds within the limit)"), ""]
     if extra:
         head += [extra, ""]
     if one_task:
@@ -320,7 +321,7 @@ def cost_box_plots(trials: pd.DataFrame, path) -> str | None:
 
 
 def aggregate_plots(summary: pd.DataFrame, path) -> str | None:
-    """Per configuration: mean and IQM of the final return and cost with their 95% intervals (the
+    """Per configuration: mean (with its 95% interval) and IQM of the final return and cost (the
     statistics of summary.md), one row per group; the cost limit dashed, the default marked."""
     df = summary[summary["n_seeds"] > 0]
     if df.empty:
@@ -332,11 +333,11 @@ def aggregate_plots(summary: pd.DataFrame, path) -> str | None:
         labels = [_what(r) for r in g.to_dict("records")]
         x = np.arange(len(g))
         for ax, name in ((ax_r, "return"), (ax_c, "cost")):
-            for dx, agg, marker in ((-0.12, "mean", "o"), (0.12, "iqm", "s")):
-                point = g[f"{name}_{agg}"].to_numpy(float)
-                lo, hi = g[f"{name}_{agg}_ci_low"].to_numpy(float), g[f"{name}_{agg}_ci_high"].to_numpy(float)
-                err = np.vstack([np.where(np.isnan(lo), 0, point - lo), np.where(np.isnan(hi), 0, hi - point)])
-                ax.errorbar(x + dx, point, yerr=err, fmt=marker, capsize=4, label=f"{agg} [95% CI]")
+            point = g[f"{name}_mean"].to_numpy(float)
+            lo, hi = g[f"{name}_mean_ci_low"].to_numpy(float), g[f"{name}_mean_ci_high"].to_numpy(float)
+            err = np.vstack([np.where(np.isnan(lo), 0, point - lo), np.where(np.isnan(hi), 0, hi - point)])
+            ax.errorbar(x - 0.12, point, yerr=err, fmt="o", capsize=4, label="mean [95%, t]")
+            ax.plot(x + 0.12, g[f"{name}_iqm"].to_numpy(float), "s", label="IQM")
             ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
             ax.set(title=f"{group}: final {name} per configuration", ylabel=f"final episode {name}")
         limit = _limit(g["cost_limit"])
@@ -490,13 +491,14 @@ def _fmt_rate(x) -> str:
 
 
 def nothing_feasible_markdown(summary: pd.DataFrame) -> str:
-    """When no configuration's mean cost is within the limit, a line saying so and naming the least
-    infeasible one (the smallest mean cost over its limit), to lead the note; "" otherwise."""
+    """When no configuration is feasible (sweeps/reports/verdicts.py's rule), a line saying so and
+    naming the least infeasible one (the smallest mean cost over its limit), to lead the note; ""
+    otherwise."""
     ok = summary[summary["cost_mean"].notna()]
-    if ok.empty or ok["mean_feasible"].astype(bool).any():
+    if ok.empty or ok["feasible"].astype(bool).any():
         return ""
     least = ok.loc[(ok["cost_mean"] - ok["cost_limit"]).idxmin()]
-    return (f"**Nothing is feasible**: no configuration's mean cost is within its limit. The least infeasible: "
+    return (f"**Nothing is feasible**: no configuration has ≥ 80% of its seeds within its limit. The least infeasible: "
             f"{_describe(least.to_dict())}, {_fmt_num(least['cost_mean'] - least['cost_limit'])} over.")
 
 

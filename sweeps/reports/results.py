@@ -24,7 +24,7 @@ from lac_rllib.constrained.metrics import (
     LANGEVIN_AT_BOUND,
     LANGEVIN_CLIP_FRACTION,
 )
-from sweeps.objective import OBJECTIVE, WALL_TIME_S, objective
+from sweeps.objective import OBJECTIVE, WALL_TIME_S, feasible, objective
 from sweeps.score import (
     EVAL_COST,
     EVAL_RETURN,
@@ -171,7 +171,7 @@ def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> 
     if math.isnan(ret) or math.isnan(cost):
         return out
     limit = row[COST_LIMIT]
-    return {**out, EPISODE_RETURN: ret, EPISODE_COST: cost, FEASIBLE: float(cost <= limit),
+    return {**out, EPISODE_RETURN: ret, EPISODE_COST: cost, FEASIBLE: float(feasible(cost, limit)),
             OBJECTIVE: objective(ret, cost, limit)}
 
 

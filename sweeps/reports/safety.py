@@ -26,38 +26,23 @@ the summary's.
 from __future__ import annotations
 
 import math
-from statistics import NormalDist
 
 import numpy as np
 import pandas as pd
 
 from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST
+from sweeps.objective import feasible
 from sweeps.reports.configurations import KEYS
 from sweeps.reports.configurations import prepared as _prepared
 from sweeps.reports.configurations import value_key as _value_key
+from sweeps.reports.verdicts import proportion_interval
 
-CONFIDENCE = 0.95
 SAFETY_COLUMNS = ["n_seeds", "n_feasible", "p_feasible", "p_feasible_low", "p_feasible_high", "violation_total",
                   "violation_mean", "worst_excess", "worst_env_steps", "worst_trial_id", "final_cost_std",
                   "final_cost_min", "final_cost_max", "cost_rate", "steps_to_feasible", "never_feasible",
                   "longest_infeasible"]
 VIOLATION_KEYS = ("violation_total", "violation_mean", "violating_iterations", "n_iterations", "worst_excess",
                   "worst_env_steps", "steps_to_feasible", "longest_infeasible")
-
-
-def wilson_interval(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float, float]:
-    """(k/n, low, high): the Wilson score interval of a binomial proportion (two-sided), in closed
-    form; all NaN when n = 0. The ends are exactly 0 at k = 0 and 1 at k = n."""
-    if n <= 0:
-        return math.nan, math.nan, math.nan
-    if not 0 <= k <= n:
-        raise ValueError(f"k={k!r} must be in [0, n={n!r}]")
-    p = k / n
-    z = NormalDist().inv_cdf(0.5 + 0.5 * confidence)
-    denom = 2 * (n + z * z)
-    center = (2 * n * p + z * z) / denom
-    delta = z / denom * math.sqrt(4 * n * p * (1 - p) + z * z)
-    return p, (0.0 if k == 0 else center - delta), (1.0 if k == n else center + delta)
 
 
 def violation(curve: pd.DataFrame) -> dict:
@@ -122,8 +107,8 @@ def safety_table(trials: pd.DataFrame, curves: dict) -> pd.DataFrame:
         ok = g[scored.loc[g.index]]
         final = pd.to_numeric(ok[EPISODE_COST], errors="coerce")
         limit = pd.to_numeric(ok[COST_LIMIT], errors="coerce")
-        k = int((final <= limit).sum())  # a NaN limit counts as not feasible
-        p, lo, hi = wilson_interval(k, len(ok))
+        k = int(np.count_nonzero(feasible(final.to_numpy(float), limit.to_numpy(float))))  # NaN: not feasible
+        p, lo, hi = proportion_interval(k, len(ok))
         runs = [(tid, violation(_with_limit(curves.get(tid), lim)))
                 for tid, lim in zip(ok["trial_id"], limit) if tid in curves]
         runs = [(tid, v) for tid, v in runs if v["n_iterations"]]

@@ -9,7 +9,8 @@ Conventions:
 - A cell is one (task, algorithm): the final return and cost of its trials, mean ± std over seeds
   (ddof=1) and the 95% bootstrap interval of the mean (sweeps/reports/stats.py). Failed trials and trials
   a scheduler stopped early are counted, not averaged (as in summary.md).
-- **Bold**: a feasible cell, mean cost ≤ the limit (the trials' ``cost_limit``), as the paper bolds.
+- **Bold**: a feasible cell by the one rule (sweeps/reports/verdicts.py: ≥ 80% of its seeds within the
+  trials' ``cost_limit``); the paper bolds by mean cost, which two seeds far over and one at 0 can meet.
 - ★: the best feasible algorithm of the task, the highest mean return among its feasible cells
   (the paper's blue); ties at the printed precision (2 decimals) are all marked.
 - Below the cells, the same algorithm on the same task as published (sweeps/reports/published.yaml): the
@@ -44,7 +45,7 @@ from lac_rllib.algorithms.registry import DEFAULT_ALGO  # noqa: E402
 from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, EPISODE_RETURN  # noqa: E402
 from sweeps.reports.configurations import fmt_num, is_na, prepared  # noqa: E402
 from sweeps.reports.published import ROWS, AtSteps, Beside, Published, Shown, Source, published  # noqa: E402
-from sweeps.reports.stats import CONFIDENCE, interval, seeds_line  # noqa: E402
+from sweeps.reports.verdicts import CONFIDENCE, METHODS, configuration_feasible, mean_interval, seeds_line  # noqa: E402
 from sweeps.score import described  # noqa: E402
 
 BEST_MARK = "★"
@@ -99,7 +100,7 @@ def _one_configuration_each(df: pd.DataFrame) -> bool:
 
 
 def _stats(x: pd.Series) -> tuple[float, float, float, float]:
-    mean, lo, hi = interval(x, "mean")
+    mean, lo, hi = mean_interval(x)
     return mean, float(x.std(ddof=1)), lo, hi  # the std is NaN with one seed
 
 
@@ -139,7 +140,7 @@ def build_table(trials: pd.DataFrame, pub: Published | None = None) -> Table | N
             limit = pd.to_numeric(df.loc[rows, COST_LIMIT], errors="coerce").median()
             limit = limits[task] if is_na(limit) else float(limit)
             c = Cell(len(ok), int((rows & left_out).sum()), _stats(ret), _stats(cost), limit)
-            cells[(task, algo)] = dataclasses.replace(c, feasible=bool(c.cost[0] <= limit))  # NaN: False
+            cells[(task, algo)] = dataclasses.replace(c, feasible=configuration_feasible(cost[ret.notna()], limit))
     for task in tasks:
         feasible = {a: c for (t, a), c in cells.items() if t == task and c.feasible and not is_na(c.ret[0])}
         if feasible:
@@ -251,9 +252,9 @@ def _value(s: Shown, which: str) -> float:
 
 
 def legend_line(intervals: bool = True) -> str:
-    what = (f"Mean ± std over seeds [{CONFIDENCE:.0%} bootstrap interval of the mean]" if intervals else
+    what = (f"Mean ± std over seeds [{CONFIDENCE:.0%} interval of the mean: {METHODS['mean']}]" if intervals else
             f"Mean ± std over seeds (the {CONFIDENCE:.0%} intervals: summary/table.md)")
-    return (f"{what}; **bold**: feasible (mean cost ≤ the limit); {BEST_MARK}: the task's best feasible return "
+    return (f"{what}; **bold**: feasible (≥ 80% of the seeds within the limit); {BEST_MARK}: the task's best feasible return "
             "(ties kept). Below each task: the same algorithm as published, return / cost (blank: none published).")
 
 

@@ -41,7 +41,11 @@ def test_every_algorithm_declares_a_search_space_that_holds_its_defaults(algo):
         base = spaces.trial_params(task, "quick", {"algo": algo})
         assert list(search) == list(declared)
         for name, dist in search.items():
-            (kind, (low, high)), = dist.items()
+            (kind, args), = dist.items()
+            if kind == "choice":  # the default among the values (LAC's β: the paper's grid, from 0)
+                assert len(set(args)) > 1 and base[name] in args, (algo, task, name, base[name], dist)
+                continue
+            low, high = args
             assert low < high and low <= base[name] <= high, (algo, task, name, base[name], dist)
 
 
@@ -68,6 +72,7 @@ def test_a_tuned_comparison_gives_every_algorithm_the_same_budget(tmp_path, caps
     print_tuned_plan(tp)
     out = capsys.readouterr().out
     assert out.count("2 samples × 1 seeds × 2,000 env steps = 4,000 env steps") == 4 and "CPU-hours" in out
+    assert "  each search: 2 samples: 1 from TPE's random start, 1 steered by TPE" in out  # sweeps/search.py
     with pytest.raises(ValueError) as e:  # a hand-made unequal plan
         check_equal_budgets({"lac": (8, 3, 40_000), "ppo_lag": (8, 3, 40_000), "sac_lag": (8, 2, 40_000)})
     assert "sac_lag gets 8 samples × 2 seeds" in str(e.value) and "lac 8 samples × 3 seeds" in str(e.value)
@@ -77,12 +82,22 @@ def test_a_tuned_comparison_gives_every_algorithm_the_same_budget(tmp_path, caps
     (TUNED + "search: default\n", "s.yaml:6: search: search with tune"),
     (TUNED + "cost_limits: [0, 2]\n", "cost_limits with tune"),
     (TUNED.replace("num_samples: 2", "num_samples: 0"), "tune.num_samples: Input should be greater than or equal to 1"),
+    (TUNED.replace("num_samples: 2", "num_samples: 1"), "s.yaml:5: tune.num_samples: num_samples 1 with searcher tpe: "
+     "all 1 come from TPE's random start, none is steered by TPE; accepted: num_samples >= 2 with tpe"),
     (TUNED.replace("num_samples: 2", "samples: 2"), "unknown key 'samples' (did you mean num_samples?)"),
 ])
 def test_bad_tune_sections_are_refused_in_one_line(tmp_path, text, needle):
     with pytest.raises(ValueError) as e:
         cli.make_plan(_args(tmp_path, text))
     assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_a_tuned_tpe_search_too_small_to_steer_a_draw_is_refused_random_is_not(tmp_path):
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, TUNED, "--tune", "1"))
+    assert "--tune: num_samples 1 with searcher tpe" in str(e.value) and "\n" not in str(e.value), str(e.value)
+    tp, = cli.make_plan(_args(tmp_path, TUNED.replace("num_samples: 2", "num_samples: 1, searcher: random")))
+    assert tp.sweep.tune.num_samples == 1
 
 
 def test_the_table_spaces_take_tune_from_the_command_line_one_comparison_per_task(tmp_path):
@@ -102,29 +117,46 @@ def test_confirm_top_beside_tune_is_refused(tmp_path):
         cli.make_plan(_args(tmp_path, TUNED, "--confirm-top", "1"))
 
 
-def test_the_gap_and_p_improvement_and_the_winners_curse_by_hand():
-    tuned, default = [3.0, 4.0, 5.0], [1.0, 2.0, 3.5]
-    gap, low, high = report.gap_interval(tuned, default)
-    assert gap == pytest.approx(4.0 - 6.5 / 3) and low < gap < high and low > 0  # every resample favours tuned
-    assert report.probability_of_improvement(tuned, default) == pytest.approx(8 / 9)  # 3 < 3.5 the only loss
+def test_the_gap_is_paired_by_seed_and_p_improvement_and_the_winners_curse_by_hand():
+    # Each fresh seed's luck moves tuned and default alike: paired, the differences 1.0, 1.1, 0.9 say tuning
+    # helps; apart (Welch) the seeds' spread (0, 5, 10) hides it.
+    tuned = {"by_seed": {3: 1.0, 4: 6.1, 5: 10.9}}
+    default = {"by_seed": {3: 0.0, 4: 5.0, 5: 10.0, 6: 7.0}}  # seed 6: the tuned run failed there
+    gap, low, high, pairs = report.paired_gap(tuned, default)
+    assert pairs == 3 and gap == pytest.approx(1.0) and 0 < low < gap < high
+    from sweeps.reports import verdicts
+
+    welch = verdicts.difference_interval(list(tuned["by_seed"].values()), list(default["by_seed"].values())[:3])
+    assert welch[1] < 0  # the unpaired interval crosses 0
     assert report.winners_curse(search_return=5.0, fresh_return=3.0) == 2.0
-    assert np.isnan(report.gap_interval([1.0], [2.0, 3.0])[1])  # one seed: no interval
+    assert np.isnan(report.paired_gap({"by_seed": {3: 1.0}}, {"by_seed": {3: 2.0}})[1])  # one pair: no interval
 
 
-def test_sensitivity_by_hand():
+def test_search_spread_by_hand():
     summary = pd.DataFrame({"n_seeds": [3, 3, 3, 3, 0], "return_mean": [1.0, 2.0, 3.0, 10.0, 99.0],
-                            "cost_mean": [5.0, 1.0, 3.0, 2.0, 0.0], "mean_feasible": [False, True, True, True, True],
-                            "feasible_fraction": [0.0, 1.0, 2 / 3, 1.0, 1.0]})
-    s = report.sensitivity(summary)  # the unfinished configuration (n_seeds 0) is left out
+                            "cost_mean": [5.0, 1.0, 3.0, 2.0, 0.0], "feasible": [False, True, True, True, True]})
+    s = report.search_spread(summary)  # the unfinished configuration (n_seeds 0) is left out
     assert s["configurations"] == 4
     assert s["return_best_minus_median"] == pytest.approx(10 - 2.5) and s["return_iqr"] == pytest.approx(4.75 - 1.75)
     assert s["cost_best_minus_median"] == pytest.approx(1 - 2.5) and s["cost_iqr"] == pytest.approx(3.5 - 1.75)
-    assert s["feasible_share"] == 0.75 and (s["feasible_fraction_min"], s["feasible_fraction_max"]) == (0.0, 1.0)
+    assert s["feasible_share"] == 0.75
 
 
 def _confirmation(rows):
-    return pd.DataFrame([{"group": g, "status": "TERMINATED", "episode_return": r, "episode_cost": c,
-                          "feasible": float(c <= 2), "cost_limit": 2.0} for g, r, c in rows])
+    """(group, return, cost[, seed[, task[, status]]]) rows of a confirmation at limit 2."""
+    out = []
+    for i, row in enumerate(rows):
+        g, r, c, *rest = row
+        seed, task, status = (*rest, *(None, "T", "TERMINATED")[len(rest):])
+        out.append({"group": g, "status": status, "episode_return": r, "episode_cost": c, "cost_limit": 2.0,
+                    "seed": i % 2 if seed is None else seed, "task": task})
+    return pd.DataFrame(out)
+
+
+def _searched(algos, trials=None):
+    summary = pd.DataFrame({"n_seeds": [3], "return_mean": [1.0], "cost_mean": [1.0], "feasible": [True]})
+    done = pd.DataFrame({"status": ["TERMINATED"] * 4})
+    return {a: (done if trials is None else trials.get(a, done), summary, 1000) for a in algos}
 
 
 def test_the_comparison_ranks_tuned_and_default_and_says_whether_tuning_changed_it():
@@ -132,14 +164,31 @@ def test_the_comparison_ranks_tuned_and_default_and_says_whether_tuning_changed_
     trials = _confirmation([("A-default", 1.0, 0.0), ("A-default", 1.0, 1.0), ("B-default", 5.0, 9.0),
                             ("B-default", 5.0, 8.0), ("A-tuned1", 2.0, 1.0), ("A-tuned1", 2.0, 0.0),
                             ("B-tuned1", 3.0, 1.0), ("B-tuned1", 3.0, 2.0)])
-    summary = pd.DataFrame({"n_seeds": [3], "return_mean": [1.0], "cost_mean": [1.0], "mean_feasible": [True],
-                            "feasible_fraction": [1.0]})
     winners = {a: [{"config": "c", "fields": {}, "feasible": True, "search": {"return_mean": 4.0}}] for a in "AB"}
-    comp = report.comparison({"A": (None, summary), "B": (None, summary)}, winners, trials)
-    assert comp["default_rank"] == ["A", "B"] and comp["tuned_rank"] == ["B", "A"] and comp["ranking_changed"]
+    comp = report.comparison(_searched("AB"), winners, trials)
+    r = comp["rankings"]["T"]
+    assert r["default"] == "A > B" and r["tuned"] == "B > A" and r["changed"]
     a = comp["algorithms"]["A"]
     assert a["gap"][0] == pytest.approx(1.0) and a["curse"] == pytest.approx(2.0) and a["tuned"]["p_feasible"] == 1.0
-    assert comp["algorithms"]["B"]["default"]["feasible"] is False
+    assert a["improved"]  # differences 1.0 and 1.0: no spread, the interval is the point, above 0
+    assert comp["algorithms"]["B"]["default"]["feasible"] is False and comp["budgets"]["equal"]
+
+
+def test_ties_failed_seeds_unequal_budgets_and_two_environments_are_reported():
+    # A and B tuned overlap (ties); C ran in another environment (the fingerprint split its task): ranked apart.
+    trials = _confirmation([("A-tuned1", 1.0, 0.0, 3), ("A-tuned1", 1.2, 0.0, 4), ("A-tuned1", 0.0, 0.0, 5, "T", "ERROR"),
+                            ("A-default", 0.9, 0.0, 3), ("A-default", 1.0, 0.0, 4), ("A-default", 1.0, 0.0, 5),
+                            ("B-tuned1", 1.1, 0.0, 3), ("B-tuned1", 1.3, 0.0, 4),
+                            ("B-default", 0.5, 0.0, 3), ("B-default", 0.6, 0.0, 4),
+                            ("C-tuned1", 9.0, 0.0, 3, "T @env:x"), ("C-tuned1", 9.1, 0.0, 4, "T @env:x"),
+                            ("C-default", 8.0, 0.0, 3, "T @env:x"), ("C-default", 8.2, 0.0, 4, "T @env:x")])
+    winners = {a: [{"config": "c", "fields": {}, "feasible": True, "search": {"return_mean": 1.0}}] for a in "ABC"}
+    short = pd.DataFrame({"status": ["TERMINATED"] * 3 + ["ERROR"]})
+    comp = report.comparison(_searched("ABC", {"B": short}), winners, trials)
+    assert set(comp["rankings"]) == {"T", "T @env:x"} and comp["rankings"]["T"]["tuned"] == "A = B"
+    assert comp["rankings"]["T @env:x"]["tuned"] == "C"  # C's 9 is never ranked above A's and B's 1
+    assert comp["algorithms"]["A"]["tuned"]["failed_seeds"] == [5] and comp["algorithms"]["A"]["pairs"] == 2
+    assert not comp["budgets"]["equal"] and comp["budgets"]["algorithms"]["B"]["env_steps"] == 3000
 
 
 @pytest.mark.slow

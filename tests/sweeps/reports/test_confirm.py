@@ -23,7 +23,7 @@ def _summary():
         ("single", 4.5, math.nan, 0.5, 2.0, False),  # one seed: no interval, ranked last
     ]
     return pd.DataFrame([{"config": c, "return_mean": r, "return_mean_ci_low": lo, "return_mean_ci_high": r + 1,
-                          "cost_mean": cost, "cost_limit": lim, "mean_feasible": cost <= lim, "is_default": d,
+                          "cost_mean": cost, "cost_limit": lim, "feasible": cost <= lim, "is_default": d,
                           "n_seeds": 3, "group": c} for c, r, lo, cost, lim, d in rows])
 
 
@@ -35,9 +35,9 @@ def test_winners_are_ranked_by_the_lower_end_of_their_return_interval():
 
 def test_held_up_compares_the_confirmed_mean_with_the_search_interval():
     search = {"return_mean": 4.0, "return_mean_ci_low": 3.5}
-    assert confirm.held_up(search, {"return_mean": 3.6, "mean_feasible": True})
-    assert not confirm.held_up(search, {"return_mean": 3.4, "mean_feasible": True})
-    assert not confirm.held_up(search, {"return_mean": 9.0, "mean_feasible": False})
+    assert confirm.held_up(search, {"return_mean": 3.6, "feasible": True})
+    assert not confirm.held_up(search, {"return_mean": 3.4, "feasible": True})
+    assert not confirm.held_up(search, {"return_mean": 9.0, "feasible": False})
 
 
 @pytest.mark.slow
@@ -114,7 +114,7 @@ def test_winners_by_mean_regret_carry_their_figures_at_every_limit():
 def test_by_return_a_configuration_that_leads_at_several_limits_is_one_winner_and_the_frontier_none():
     rows = [("a-b1", 5.0, 4.0, "g"), ("a-b2", 6.0, 4.5, "g"), ("c-b1", 3.0, 2.0, "g"), ("nu-b1", 9.0, 8.0, "frontier")]
     summary = pd.DataFrame([{"config": c, "return_mean": r, "return_mean_ci_low": lo, "return_mean_ci_high": r + 1,
-                             "cost_mean": 0.0, "cost_limit": 1.0, "mean_feasible": True, "is_default": False,
+                             "cost_mean": 0.0, "cost_limit": 1.0, "feasible": True, "is_default": False,
                              "n_seeds": 3, "group": g} for c, r, lo, g in rows])
     fields = {"a-b1": {"beta": 1.0}, "a-b2": {"beta": 1.0}, "c-b1": {"beta": 2.0}, "nu-b1": {}}
     top = confirm.winners(summary, fields, 2)
@@ -135,7 +135,7 @@ def test_the_verdict_across_a_ladder_is_per_limit_with_the_regret_on_fresh_seeds
     top = confirm.regret_winners(trials, _fields_of(trials), 1, "mean-regret")
     # The confirmation's summary: top1 held up at b = 5 (2.0 ≥ its low end) and b = 25, not at 15 (cost 16 > 15).
     confirmed = pd.DataFrame([{"group": "top1", "cost_limit": b, "return_mean": r, "return_mean_ci_low": r,
-                               "return_mean_ci_high": r, "cost_mean": c, "mean_feasible": c <= b, "n_seeds": 2,
+                               "return_mean_ci_high": r, "cost_mean": c, "feasible": c <= b, "n_seeds": 2,
                                "feasible_fraction": float(c <= b)} for b, r, c in ((5.0, 2.0, 4.0), (15.0, 9.0, 16.0),
                                                                                   (25.0, 9.0, 20.0))])
     fresh = trials.assign(group=trials["group"].where(trials["group"].eq("frontier"), "top1"))

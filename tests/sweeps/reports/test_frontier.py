@@ -13,7 +13,7 @@ NAN = math.nan
 
 def _point(name, ret, cost, limit=10.0, task="T", **kw):
     return dict(name=name, group="g", param="langevin_steps", value=name, task=task, config=f"g-{name}",
-                return_mean=ret, cost_mean=cost, cost_limit=limit, **kw)
+                return_mean=ret, cost_mean=cost, cost_limit=limit, feasible=cost <= limit, **kw)
 
 
 # (name, return, cost): on the frontier or not, and why. Limit 10.
@@ -63,14 +63,14 @@ def _summary():
                              return_mean_ci_low=ret - rng.uniform(0.5, 2), return_mean_ci_high=ret + 1.0,
                              cost_mean_ci_low=NAN if i == 0 else cost - 2,  # no cost bar on the first
                              cost_mean_ci_high=NAN if i == 0 else cost + 3,
-                             feasible_fraction=1.0 if cost <= 25 else 0.0, is_default=v == 20))
+                             feasible_fraction=1.0 if cost <= 25 else 0.0, feasible=cost <= 25, is_default=v == 20))
         for algo, ret, cost in (("lac", 8.0, 14.0), ("ppo_lag", 4.0, 30.0), ("sac_lag", 9.0, 20.0)):
             rows.append(dict(group="compare", param="algo", value=algo, task=task, config=f"compare-algo={algo}",
                              n_seeds=3, return_mean=ret, cost_mean=cost, cost_limit=25.0, return_mean_ci_low=ret - 1,
                              return_mean_ci_high=ret + 1, cost_mean_ci_low=cost - 1, cost_mean_ci_high=cost + 1,
-                             feasible_fraction=2 / 3, is_default=False))
+                             feasible_fraction=2 / 3, feasible=cost <= 25, is_default=False))
     rows.append(dict(group="VT", param="langevin_steps", value=160, task="PointGoal1", n_seeds=0,
-                     return_mean=NAN, cost_mean=NAN, cost_limit=25.0, is_default=False))  # all seeds failed
+                     return_mean=NAN, cost_mean=NAN, cost_limit=25.0, feasible=False, is_default=False))  # all failed
     return pd.DataFrame(rows)
 
 

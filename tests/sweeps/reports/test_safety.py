@@ -8,26 +8,25 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from sweeps.reports import chain_health, safety
+from sweeps.reports import chain_health, safety, verdicts
 
 NAN = math.nan
 
 
 @pytest.mark.parametrize("k,n", [(0, 1), (1, 1), (0, 3), (1, 3), (2, 3), (3, 3), (0, 10), (4, 10), (10, 10),
                                  (7, 20), (1, 2)])
-@pytest.mark.parametrize("confidence", [0.95, 0.8])
-def test_wilson_interval_matches_scipy(k, n, confidence):
-    p, lo, hi = safety.wilson_interval(k, n, confidence)
-    ref = stats.binomtest(k, n).proportion_ci(confidence_level=confidence, method="wilson")
+def test_wilson_interval_matches_scipy(k, n):
+    p, lo, hi = verdicts.proportion_interval(k, n)
+    ref = stats.binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
     assert p == k / n
     assert lo == pytest.approx(ref.low, abs=1e-12) and hi == pytest.approx(ref.high, abs=1e-12)
     assert 0.0 <= lo <= p <= hi <= 1.0
 
 
 def test_wilson_interval_without_trials():
-    assert all(math.isnan(x) for x in safety.wilson_interval(0, 0))
+    assert all(math.isnan(x) for x in verdicts.proportion_interval(0, 0))
     with pytest.raises(ValueError):
-        safety.wilson_interval(4, 3)
+        verdicts.proportion_interval(4, 3)
 
 
 def curve(costs, limit=25.0, steps=None):
@@ -87,7 +86,7 @@ def test_safety_table_per_configuration():
     assert list(t.columns) == safety.KEYS + safety.SAFETY_COLUMNS and list(t["value"]) == [10, 20]
     a = t.iloc[0]
     assert (a["n_seeds"], a["n_feasible"]) == (3, 2)
-    assert (a["p_feasible"], a["p_feasible_low"], a["p_feasible_high"]) == pytest.approx(safety.wilson_interval(2, 3))
+    assert (a["p_feasible"], a["p_feasible_low"], a["p_feasible_high"]) == pytest.approx(verdicts.proportion_interval(2, 3))
     assert a["violation_total"] == pytest.approx((15 + 13 + 6) / 3)
     assert a["violation_mean"] == pytest.approx((15 / 2 + 13 / 3 + 6 / 2) / 3)
     assert (a["worst_excess"], a["worst_env_steps"], a["worst_trial_id"]) == (15.0, 1000.0, "a0")

@@ -20,12 +20,14 @@ NAN = math.nan
 PG, ANT = "SafetyPointGoal1-v0", "focops/AntVelocity-v0"
 LIMITS = {PG: 25.0, ANT: 103.115}
 #: (task, algo) → (return mean, cost mean) of 3 seeds at mean - 1, mean, mean + 1 (means exact).
-#: PointGoal: LAC and PPO-L tie on the best feasible return, PPO-L's cost is exactly the limit
-#: (feasible), P3O's return is higher but over the limit. Ant: P3O is 0.085 over the limit.
+#: PointGoal: LAC and PPO-L tie on return; PPO-L's mean cost is exactly the limit, but its seeds' 24,
+#: 25, 26 put one of three over: infeasible by the one rule (≥ 80% of seeds), where the paper's
+#: mean-cost bold would call it feasible. P3O's return is higher but over the limit. Ant: LAC's mean
+#: cost 103 is under 103.115 but its third seed (104) is over: infeasible too; P3O is 0.085 over.
 HAND = {(PG, "lac"): (14.0, 22.0), (PG, "ppo_lag"): (14.0, 25.0), (PG, "p3o"): (30.0, 31.0),
         (ANT, "lac"): (1900.0, 103.0), (ANT, "ppo_lag"): (-20.0, 5.0), (ANT, "p3o"): (1950.0, 103.2)}
-FEASIBLE = {(PG, "lac"), (PG, "ppo_lag"), (ANT, "lac"), (ANT, "ppo_lag")}
-BEST = {(PG, "lac"), (PG, "ppo_lag"), (ANT, "lac")}
+FEASIBLE = {(PG, "lac"), (ANT, "ppo_lag")}
+BEST = {(PG, "lac"), (ANT, "ppo_lag")}
 
 
 def _trial(task, algo, seed, ret, cost, status="TERMINATED"):
@@ -67,12 +69,12 @@ def test_the_table_bolds_the_feasible_cells_and_marks_the_best_feasible_per_task
     assert {k for k, c in t.cells.items() if c.best} == BEST
     cell = t.cells[(PG, "ppo_lag")]
     assert (cell.n_seeds, cell.ret[:2], cell.cost[:2]) == (3, (14.0, 1.0), (25.0, 1.0))
-    assert cell.ret[2] < 14.0 < cell.ret[3]  # the bootstrap interval of the mean brackets it
+    assert cell.ret[2] < 14.0 < cell.ret[3]  # the interval of the mean brackets it
     assert (t.cells[(ANT, "ppo_lag")].n_seeds, t.cells[(ANT, "ppo_lag")].n_failed) == (3, 1)
 
     md = _markdown(t, 40_000)
     rows = _rows(md)
-    assert [c.split(" [")[0] for c in rows[(PG, "return")]] == ["30.00 ± 1.00", "**14.00 ± 1.00** " + BEST_MARK,
+    assert [c.split(" [")[0] for c in rows[(PG, "return")]] == ["30.00 ± 1.00", "14.00 ± 1.00",
                                                                  "**14.00 ± 1.00** " + BEST_MARK]
     for task in (PG, ANT):
         for which in ("return", "cost"):
