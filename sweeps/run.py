@@ -187,6 +187,11 @@ def print_plan(plan: Plan) -> None:
     seed_text = f"seeds {seeds[0]}..{seeds[-1]}" if contiguous else f"seeds {list(seeds)}"
     what = f"{sweep.num_samples} Optuna {sweep.searcher.upper()} samples x " if sweep.is_search else ""
     print(f"  trials: {plan.n_trials}  ({what}{len(seeds)} seed(s) per configuration: {seed_text})")
+    if sweep.is_search:  # how many of the samples the searcher steers (sweeps/search.py)
+        from sweeps.search import configurations_at_once, search_text
+
+        at_once = configurations_at_once(plan.concurrency, len(seeds))
+        print(f"  search: {search_text(sweep.searcher, sweep.num_samples, at_once)}")
     episodes = sweep.eval_episodes if sweep.eval_episodes is not None else 10
     modes = sweep.eval_modes or ["generator", "stochastic"]
     print(f"  score: {sweep.score} ("

@@ -9,7 +9,6 @@ import os
 import platform
 import signal
 import sys
-import threading
 from pathlib import Path
 
 import optuna
@@ -29,6 +28,7 @@ from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
 from sweeps.reports.results import close_sweep
 from sweeps.scheduler import ConfigurationASHA
 from sweeps.score import SCORE_COST, SCORE_RETURN, SCORES
+from sweeps.search import PicklableNSGAIISampler, make_sampler  # noqa: F401 (a resumed NSGA-II sweep's pickle)
 from sweeps.tracking import (
     STATUS_TAG,
     STOPPED_TAG,
@@ -54,21 +54,6 @@ class ConstrainedOptunaSearch(OptunaSearch):
         if ot_trial is not None and constraint is not None and math.isfinite(constraint):
             ot_trial.set_constraint("episode_cost_minus_limit", float(constraint))
         super().on_trial_complete(trial_id, result=result, error=error)
-
-
-class PicklableNSGAIISampler(optuna.samplers.NSGAIISampler):
-    """Optuna 5.1's NSGA-II sampler holds a ``threading.Lock`` (its generation cache), which
-    Tune cannot pickle into the experiment state the Tuner writes at once (docs/dependencies.md,
-    "Optuna's NSGA-II and Tune's pickling"): the lock is left out and a new one made on load."""
-
-    def __getstate__(self):
-        state = self.__dict__.copy()
-        state.pop("_thread_lock", None)
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        self._thread_lock = threading.Lock()
 
 
 class SeedRepeater(Repeater):
@@ -292,10 +277,10 @@ def search_algorithm(plan: Plan) -> SeedRepeater | None:
     # the constraint each configuration is told (ConstrainedOptunaSearch); random ignores it.
     # A multi-objective search (motpe, nsga2) has two: return up, cost down; its result is the
     # study's Pareto set (sweeps/reports/report.py, pareto.json), the constraint marking the feasible part.
-    sampler = {"tpe": optuna.samplers.TPESampler, "motpe": optuna.samplers.TPESampler,
-               "random": optuna.samplers.RandomSampler, "nsga2": PicklableNSGAIISampler}[sweep.searcher]
+    # The sampler's random start is the sweep's, not Optuna's default (sweeps/search.py).
+    sampler = make_sampler(sweep.searcher, sweep.num_samples, infra.optuna_seed)
     metric, mode = ((list(MULTI_OBJECTIVES), ["max", "min"]) if sweep.multi_objective else (METRIC, MODE))
-    optuna_search = ConstrainedOptunaSearch(sampler=sampler(seed=infra.optuna_seed),
+    optuna_search = ConstrainedOptunaSearch(sampler=sampler,
                                             metric=metric, mode=mode, study_name=plan.name,
                                             storage=optuna.storages.RDBStorage(plan.optuna_storage))
     return SeedRepeater(optuna_search, repeat=len(plan.seeds))

@@ -133,9 +133,14 @@ def make_tuned_plan(sweep: SweepFile, space: str, infra, search_dirs=(), origin=
 
 def print_tuned_plan(tp: TunedPlan) -> None:
     """The comparison's budgets before anything runs: equal by construction, said per algorithm."""
+    from sweeps.search import configurations_at_once, search_text
+
     t = tp.sweep.tune
-    print(f"tuned comparison '{tp.name}': {', '.join(tp.searches)} on {tp.task}, budget {tp.sweep.budget}, "
-          f"{t.searcher.upper()} with the feasibility constraint")
+    how = "TPE with the feasibility constraint" if t.searcher == "tpe" else "random search"
+    print(f"tuned comparison '{tp.name}': {', '.join(tp.searches)} on {tp.task}, budget {tp.sweep.budget}, {how}")
+    first = next(iter(tp.searches.values()))
+    at_once = configurations_at_once(first.concurrency, len(first.seeds))
+    print(f"  each search: {search_text(t.searcher, t.num_samples, at_once)}")
     for algo, p in tp.searches.items():
         n, seeds, steps = budget_of(p)
         print(f"  {algo:>10}: {_budget_text((n, seeds, steps))} = {n * seeds * steps:,} env steps, "
