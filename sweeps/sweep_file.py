@@ -50,6 +50,7 @@ from lac_rllib.errors import excerpt
 from sweeps.bounded_yaml import YamlRefused
 from sweeps.bounded_yaml import read as read_yaml
 from sweeps.bounded_yaml import read_text as read_yaml_text
+from sweeps.search import TPE_STARTUP, random_start, steered
 
 BUILTIN_DIR = Path(__file__).with_name("builtin")
 BUDGET_NAMES = ("smoke", "quick", "paper")
@@ -378,9 +379,10 @@ class TuneSpec(BaseModel):
 
     model_config = _schema_config()
     searcher: Literal["random", "tpe"] = "tpe"
-    """Optuna's sampler for every algorithm: ``tpe`` (with the feasibility constraint) or ``random``."""
+    """Optuna's sampler for every algorithm: ``tpe`` (with the feasibility constraint; its first
+    half of the samples, at most 10, are its random start) or ``random``."""
     num_samples: Int(1, MAX_SAMPLES) = 8
-    """Configurations each algorithm's search samples."""
+    """Configurations each algorithm's search samples (with ``tpe`` at least 2: one steered by TPE)."""
     seeds: Seeds = Seeds(count=3)
     """Seeds per sampled configuration (``3``, ``{count: 3, start: 0}`` or a list)."""
     confirm_seeds: Int(1, MAX_SEEDS) = 5
@@ -389,6 +391,17 @@ class TuneSpec(BaseModel):
     """Configurations per algorithm confirmed (the registry keeps the first)."""
 
     _seeds = field_validator("seeds", mode="before")(classmethod(lambda cls, v: _seeds_form(v)))
+
+    @model_validator(mode="after")
+    def _steered(self):
+        # A "tuned" comparison whose every draw is TPE's random start is random search (sweeps/search.py).
+        if self.searcher == "tpe" and steered(self.searcher, self.num_samples) == 0:
+            start = random_start(self.searcher, self.num_samples)
+            raise KeyedError(("num_samples",), f"num_samples {self.num_samples} with searcher tpe: all {start} "
+                                               f"come from TPE's random start, none is steered by TPE; accepted: "
+                                               f"num_samples >= 2 with tpe (half of them its random start, at "
+                                               f"most {TPE_STARTUP}), or searcher random")
+        return self
 
 
 class SweepFile(BaseModel):
@@ -433,7 +446,9 @@ class SweepFile(BaseModel):
     """``grid`` (``grid``/``groups``; the default without ``search``), ``random`` (Optuna's random
     sampler), ``tpe`` (Optuna's TPE on one objective with the feasibility constraint; the default with
     ``search``), or a multi-objective search on return and cost with the constraint, whose result is
-    the Pareto set: ``motpe`` (Optuna's TPE on two objectives) or ``nsga2`` (NSGA-II)."""
+    the Pareto set: ``motpe`` (Optuna's TPE on two objectives) or ``nsga2`` (NSGA-II). TPE's random
+    start (NSGA-II's random first generation) is half the samples, at most Optuna's default (10; 50):
+    the plan says how many draws each steers."""
     num_samples: Int(1, MAX_SAMPLES) | None = None
     """Configurations a search samples (each trained with every seed); default 20."""
     scheduler: Literal["none", "asha"] | None = None
