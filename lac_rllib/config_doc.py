@@ -97,7 +97,9 @@ def _algo_section(algo: str, first: bool) -> list[str]:
                 "(`SEARCH_SPACE` in its config.py); a range *around the default* is placed around the field's "
                 "value on the trial's task.", "", "| field | distribution | range | source |", "|---|---|---|---|"]
         for n, d in mod.SEARCH_SPACE.items():
-            where = f"default / {d.around:g} to default × {d.around:g}" if d.around else " to ".join(map(str, d.args))
+            where = (f"default / {d.around:g} to default × {d.around:g}" if d.around
+                     else "one of " + ", ".join(f"{a:g}" if isinstance(a, float) else str(a) for a in d.args)
+                     if d.kind == "choice" else " to ".join(map(str, d.args)))
             out.append(f"| `{n}` | {d.kind} | {where} | {_cell(d.source)} |")
     return out
 

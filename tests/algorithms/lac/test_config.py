@@ -126,3 +126,41 @@ def test_linear_lr_decay_needs_the_budget():
     assert config.lr_or_schedule(3e-4) == 3e-4
     config.training(lr_schedule="linear", total_env_steps=1000)
     assert config.lr_or_schedule(3e-4) == [[0, 3e-4], [1000, 1.5e-4]]
+
+
+def _mass(d, low: float, high: float = float("inf"), default=None) -> float:
+    """The share of a declared distribution's draws in [low, high] (exact, per kind)."""
+    import math
+
+    args = d.bounds(default)
+    if d.kind == "choice":
+        return sum(low <= v <= high for v in args) / len(args)
+    if d.kind == "int":
+        values = range(int(args[0]), int(args[1]) + 1)
+        return sum(low <= v <= high for v in values) / len(values)
+    lo, hi = max(args[0], low), min(args[1], high)
+    if lo > hi:
+        return 0.0
+    if d.kind == "loguniform":
+        return math.log(hi / lo) / math.log(args[1] / args[0])
+    return (hi - lo) / (args[1] - args[0])
+
+
+def test_the_search_space_spends_its_samples_where_the_actor_learns():
+    """β: less than half of the draws at β >= 10, where the actor barely moves at the quick budget
+    (uniform on [0, 20] put half there, and docs/tuned-pointhazard drew 7 of 8), and the default 0
+    drawn at all; η and λ: log ranges centred on every preset's default (an absolute [1e-4, 1e-2]
+    put the safety_gym preset's λ = 1e-4 at its edge)."""
+    import math
+
+    from lac_rllib.algorithms.lac.config import PRESETS
+    from lac_rllib.algorithms.registry import search_space
+
+    space = search_space("lac")
+    assert _mass(space["beta"], 10.0) < 0.5 and _mass(space["beta"], 0.0, 0.0) > 0
+    assert set(space["beta"].bounds(None)) == {0.0, 1.0, 5.0, 10.0, 20.0}  # the paper's Table 3 (PR)
+    for name in ("langevin_step_size", "temperature"):
+        for preset in (None, *PRESETS):
+            default = PRESETS.get(preset, {}).get(name, getattr(LACParams(), name))
+            low, high = space[name].bounds(default)
+            assert math.isclose(math.sqrt(low * high), default), (name, preset, low, high, default)
