@@ -5,7 +5,9 @@ Each figure has a source (with its URL, simulator, env steps and per-task limit)
 algorithm name, and [mean, std] of return and cost as the source prints them. A figure may also
 carry ``at_steps``: the same curve at earlier budgets, read off the source's published learning-curve
 image with a stated tolerance (:class:`AtSteps`), so a run at 500k is set beside the source at 500k
-rather than at its final 1e7 (:meth:`Figure.at`; a table's at once: :meth:`Published.beside`). A bad file is one line,
+rather than at its final 1e7 (:meth:`Figure.at`; a table's at once: :meth:`Published.beside`). Whether a
+run is "within" such a band is decided in one place, :func:`band_verdict` (its docstring states the
+rule; the docs' within/overlaps/below/above are its words). A bad file is one line,
 ``FILE:LINE: key.path: what is wrong`` (:class:`PublishedError`). sweeps/reports/table.py and
 benchmarks/fidelity.py place them beside their runs.
 """
@@ -233,6 +235,65 @@ class Beside:
     """The runs' env steps."""
     figures: dict[tuple[str, str, str], Shown]
     """(source row, task, algo) → the figure shown there, in print order (rows, tasks, algos)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class BandVerdict:
+    """Where a run's seeds stand against a reference band (:func:`band_verdict`)."""
+
+    word: Literal["within", "overlaps", "outside"]
+    """``within``: the seeds' mean lies in the band; ``overlaps``: it does not, but mean ± 1 SD
+    reaches the band; ``outside``: not even mean ± 1 SD reaches it."""
+    side: Literal["below", "above"] | None
+    """Where the mean lies when it is not within (None when it is)."""
+    mean: float
+    """The mean of the seeds' scores."""
+    sd: float
+    """Their sample standard deviation (ddof = 1; 0 for one seed)."""
+    delta: float
+    """mean − the band's centre."""
+
+    @property
+    def phrase(self) -> str:
+        """How a report says it: ``within``, ``overlaps, mean below`` (``… above``), ``below``, ``above``."""
+        if self.word == "within":
+            return "within"
+        return f"overlaps, mean {self.side}" if self.word == "overlaps" else self.side
+
+
+def band_verdict(scores, centre: float, tolerance: float) -> BandVerdict:
+    """Whether a run is **within the reference band**: the one rule every report and doc uses.
+
+    The band is [centre − tolerance, centre + tolerance], closed: for a figure read off a curve
+    (:class:`AtSteps`), the curve's height ± the reading's tolerance; ``scores`` are the run's
+    per-seed scores (one number per seed). The rule, on their mean m and sample SD s (ddof = 1, 0
+    for one seed):
+
+    - **within**: m lies in the band;
+    - **overlaps** (said "overlaps, mean below/above"): m lies outside it but [m − s, m + s]
+      reaches it; a statement about the seeds' spread, not about where the run's mean is, and a
+      loose one: a run whose seeds scatter widely overlaps almost any band;
+    - **outside** (said "below"/"above"): not even [m − s, m + s] reaches it.
+
+    Neither word is a test: a curve reading's tolerance is how well the image can be read, not the
+    source's spread over its seeds, so "outside" does not say the two differ beyond their noise,
+    and "within" does not say they agree within it.
+    """
+    values = [float(x) for x in scores]
+    if not values:
+        raise ValueError("band_verdict needs at least one seed's score")
+    if tolerance < 0:
+        raise ValueError(f"a band's tolerance is ≥ 0, not {tolerance}")
+    n = len(values)
+    mean = sum(values) / n
+    sd = (sum((x - mean) ** 2 for x in values) / (n - 1)) ** 0.5 if n > 1 else 0.0
+    lo, hi = centre - tolerance, centre + tolerance
+    delta = mean - centre
+    if lo <= mean <= hi:
+        return BandVerdict("within", None, mean, sd, delta)
+    side = "below" if mean < lo else "above"
+    word = "overlaps" if mean - sd <= hi and mean + sd >= lo else "outside"
+    return BandVerdict(word, side, mean, sd, delta)
 
 
 def _check_readings(f: Figure, src: Source, i: int) -> None:
