@@ -263,6 +263,11 @@ def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | N
         raise ValueError(f"--confirm-by {by}: the regret over a ladder needs the sweep's {missing} "
                          f"(R*(b) comes from the fixed-multiplier frontier); accepted: --confirm-by {BY_RETURN}, "
                          "or a sweep file with cost_limits and frontier")
+    from sweeps.reports.verdicts import MIN_FRONTIER_SEEDS
+
+    if by != BY_RETURN and len(plan.seeds) < MIN_FRONTIER_SEEDS:
+        raise ValueError(f"--confirm-by {by} with {len(plan.seeds)} seed(s): R*(b) chooses the frontier's ν on some "
+                         f"seeds and measures it on others; accepted: --seeds {MIN_FRONTIER_SEEDS} or more")
     if len(plan.tasks) != 1:
         raise ValueError(f"--confirm-top with {len(plan.tasks)} tasks: a confirmation reruns one task's winners; "
                          "accepted: a sweep of one task")

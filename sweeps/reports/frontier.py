@@ -8,8 +8,8 @@ dominate each other: both stay on the frontier. A configuration without finished
 return or cost) or without a limit is never on it. Why feasible only: a constrained problem ranks
 an over-limit policy below every within-limit one, however high its return.
 
-The plot shows every configuration on (cost, return) axes with its 95% bootstrap intervals in
-both directions (sweeps/reports/stats.py), one panel per task: the cost limit dashed, the frontier starred
+The plot shows every configuration on (cost, return) axes with its 95% intervals in
+both directions (sweeps/reports/verdicts.py), one panel per task: the cost limit dashed, the frontier starred
 and joined in order of cost, the default configuration ringed, and the baselines of a compare
 sweep (another ``algo`` than LAC) in a colour of their own per algorithm. ``frontier_html`` is the
 same figure in plotly, with the configuration, its intervals, seeds and feasible fraction on hover;
@@ -292,7 +292,7 @@ def frontier_figure(summary: pd.DataFrame):
                           row=1, col=col)
         fig.update_xaxes(title_text="final episode cost", row=1, col=col)
         fig.update_yaxes(title_text="final episode return", row=1, col=col)
-    fig.update_layout(title="Final return vs cost per configuration (mean, 95% bootstrap CI); hollow: over the limit",
+    fig.update_layout(title="Final return vs cost per configuration (mean, 95% interval); hollow: infeasible",
                       template="plotly_white", width=max(700, 620 * len(tasks)), height=560)
     return fig
 

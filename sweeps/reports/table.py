@@ -7,7 +7,7 @@ the paper's Tables 1 and 2: a block of rows per task, a column per algorithm (``
 
 Conventions:
 - A cell is one (task, algorithm): the final return and cost of its trials, mean ± std over seeds
-  (ddof=1) and the 95% bootstrap interval of the mean (sweeps/reports/stats.py). Failed trials and trials
+  (ddof=1) and the 95% interval of the mean (sweeps/reports/verdicts.py). Failed trials and trials
   a scheduler stopped early are counted, not averaged (as in summary.md).
 - **Bold**: a feasible cell by the one rule (sweeps/reports/verdicts.py: ≥ 80% of its seeds within the
   trials' ``cost_limit``); the paper bolds by mean cost, which two seeds far over and one at 0 can meet.

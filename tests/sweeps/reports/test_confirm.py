@@ -99,16 +99,21 @@ def _fields_of(trials):
     return {c: {"algo": a} for c, a in zip(trials["config"], trials["algo"])}
 
 
-def test_winners_by_mean_regret_carry_their_figures_at_every_limit():
+def test_winners_by_mean_regret_carry_their_figures_at_every_limit(capsys):
     trials = _ladder_trials()
     top = confirm.regret_winners(trials, _fields_of(trials), 1, "mean-regret")
-    assert [(w["name"], w["fields"]) for w in top] == [("ppo_lag", {"algo": "ppo_lag"})]  # 0 against 2/3
-    assert top[0]["search"] == {"worst_regret": 1.0, "mean_regret": 0.0}
+    # ppo_lag is infeasible at b = 5 (one seed of three over): it has no regret over the ladder and is
+    # never chosen, though its regrets where feasible (0, -3) are the smaller.
+    assert [(w["name"], w["fields"]) for w in top] == [("sac_lag", {"algo": "sac_lag"})]
+    assert top[0]["search"] == {"worst_regret": pytest.approx(1.0), "mean_regret": pytest.approx(1 / 3)}
     assert sorted(top[0]["by_limit"]) == [5.0, 15.0, 25.0]
-    assert [top[0]["by_limit"][b]["regret"] for b in (5.0, 15.0, 25.0)] == [0.0, 1.0, -1.0]
-    assert top[0]["by_limit"][15.0]["return_mean"] == 5.0
-    both = confirm.regret_winners(trials, _fields_of(trials), 2, "worst-regret")  # a tie at 1: both, once each
-    assert sorted(w["name"] for w in both) == ["ppo_lag", "sac_lag"] and [w["group"] for w in both] == ["top1", "top2"]
+    assert [top[0]["by_limit"][b]["regret"] for b in (5.0, 15.0, 25.0)] == pytest.approx([1.0, 1.0, -1.0])
+    assert top[0]["by_limit"][15.0]["return_mean"] == pytest.approx(5.0)
+    both = confirm.regret_winners(trials, _fields_of(trials), 2, "worst-regret")  # two asked, one qualifies
+    assert [w["name"] for w in both] == ["sac_lag"] and [w["group"] for w in both] == ["top1"]
+    only_ppo = trials[trials["algo"].ne("sac_lag")]
+    assert confirm.regret_winners(only_ppo, _fields_of(only_ppo), 1, "worst-regret") == []
+    assert "no configuration has a worst regret to choose by (ppo_lag: infeasible at b = 5)" in capsys.readouterr().out
 
 
 def test_by_return_a_configuration_that_leads_at_several_limits_is_one_winner_and_the_frontier_none():
@@ -139,11 +144,11 @@ def test_the_verdict_across_a_ladder_is_per_limit_with_the_regret_on_fresh_seeds
                                "feasible_fraction": float(c <= b)} for b, r, c in ((5.0, 2.0, 4.0), (15.0, 9.0, 16.0),
                                                                                   (25.0, 9.0, 20.0))])
     fresh = trials.assign(group=trials["group"].where(trials["group"].eq("frontier"), "top1"))
-    fresh = fresh[fresh["group"].eq("frontier") | fresh["algo"].eq("ppo_lag")]
+    fresh = fresh[fresh["group"].eq("frontier") | fresh["algo"].eq("sac_lag")]
     text = confirm.confirmation_markdown(top, confirmed, fresh)
-    assert "| top1 | ppo_lag | 15 |" in text and "held up at 2 of 3 limits" in text, text
-    # The fresh seeds are the search's own here, so their regrets are the search's: worst 1, mean 0.
-    assert "worst regret 1.00 on the search's seeds, 1.00 on the fresh ones; mean regret 0.00, 0.00" in text, text
+    assert "| top1 | sac_lag | 15 |" in text and "held up at 2 of 3 limits" in text, text
+    # The fresh seeds are the search's own here, so their regrets are the search's: worst 1, mean 1/3.
+    assert "worst regret 1.00 on the search's seeds, 1.00 on the fresh ones; mean regret 0.33, 0.33" in text, text
 
 
 @pytest.mark.parametrize("extra,needle", [
@@ -161,3 +166,14 @@ def test_a_regret_choice_without_a_ladder_and_frontier_is_one_line_before_ray(tm
     with pytest.raises(ValueError) as e:
         cli.make_plan(args)
     assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_a_regret_choice_on_one_seed_is_refused_before_ray(tmp_path):
+    """R*(b) chooses ν on some of the frontier's seeds and measures it on others: one seed cannot."""
+    path = tmp_path / "l.yaml"
+    path.write_text("task: lac/PointHazard-v0\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\ncost_limits: [0, 2]\n"
+                    "frontier: {algo: ppo_lag, nu: [0, 1]}\n")
+    args = cli.parse_args(["--config", str(path), "--tracking-uri", f"sqlite:///{tmp_path / 'm.db'}",
+                           "--storage", str(tmp_path / "rr"), "--confirm-top", "1", "--confirm-by", "worst-regret"])
+    with pytest.raises(ValueError, match=r"--confirm-by worst-regret with 1 seed\(s\).*accepted: --seeds 3 or more"):
+        cli.make_plan(args)
