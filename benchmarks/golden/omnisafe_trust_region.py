@@ -17,12 +17,15 @@ What the step computes is read from the reference's own calls: the conjugate-gra
 H⁻¹g, and CPO's and PCPO's p = H⁻¹b) by wrapping the ``conjugate_gradients`` its module calls, the
 full step and the line search's result by wrapping ``_search_step_size`` / ``_cpo_search_step``,
 the scalars (xHx, α, CPO's q, r, s, A, B, λ*, ν*, case, ``AcceptanceStep``, ``Train/KL``) from its
-``logger.store``; then the parameters after. CPO is recorded three times on the same weights and
-batch, Jc chosen so the three cases its dual and recovery take arise: ``case2`` (Jc 24.95: c < 0,
-the boundary cuts the trust region; [O]'s dual gives λ* < 0 and the line search rejects all 20
-fractions), ``case1`` (Jc 25.09: θ_old infeasible, a feasible part in reach; ν* > 0) and ``case0``
-(Jc 40: recovery along −H⁻¹b). PCPO's Jc 26 makes its projection bind and its line search back
-off 8 times. Written to tests/fixtures/golden/<algo>-omnisafe.npz (benchmarks/golden/fixture.py)."""
+``logger.store``; then the parameters after. CPO is recorded four times on the same weights and
+batch, Jc chosen so that the three cases of its dual and recovery arise and its line search backs
+off: ``case2`` (Jc 24.95: c < 0, the boundary cuts the trust region; [O]'s dual gives λ* < 0 and
+the line search rejects all 20 fractions), ``case1`` (Jc 25.09: θ_old infeasible, a feasible part
+in reach; ν* > 0), ``case0`` (Jc 40: recovery along −H⁻¹b) and ``backtrack`` (Jc 25.051: case 1
+again, its step's linear cost change just below 0, so that the surrogate's curvature makes the
+cost rise at the full step and at the next six fractions, by 2.1e-3 down to 4.6e-5, and the line
+search accepts the 8th, 0.8⁷). PCPO's Jc 26 makes its projection bind and its line search back off
+8 times. Written to tests/fixtures/golden/<algo>-omnisafe.npz (benchmarks/golden/fixture.py)."""
 
 from __future__ import annotations
 
@@ -43,7 +46,8 @@ SOLVER_MODULE = {"trpo_lag": "omnisafe.algorithms.on_policy.base.trpo",
                  "pcpo": "omnisafe.algorithms.on_policy.second_order.pcpo"}
 SEARCH = {"trpo_lag": "_search_step_size", "cpo": "_cpo_search_step", "pcpo": "_cpo_search_step"}
 #: Jc per recorded step (scenario name → the episode cost the step reads).
-EP_COSTS = {"trpo_lag": {"": 40.0}, "cpo": {"case2": 24.95, "case1": 25.09, "case0": 40.0}, "pcpo": {"": 26.0}}
+EP_COSTS = {"trpo_lag": {"": 40.0}, "cpo": {"case2": 24.95, "case1": 25.09, "case0": 40.0, "backtrack": 25.051},
+            "pcpo": {"": 26.0}}
 ROWS = 128
 first_order.OMNISAFE_NAMES.update(OMNISAFE_NAMES)  # first_order.build looks the class up there
 first_order.ROWS = ROWS  # first_order.make_batch's rows

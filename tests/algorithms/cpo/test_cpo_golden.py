@@ -1,7 +1,9 @@
-"""CPO against OmniSafe 0.5.0's own step (tests/fixtures/golden/README.md), three times on the
-same weights and batch with Jc chosen for three of its cases: ``case2`` (c < 0, the boundary cuts
-the trust region: [O]'s dual gives λ* < 0 and all 20 fractions are rejected), ``case1`` (θ_old
-infeasible, a feasible part in reach: ν* > 0) and ``case0`` (recovery along −H⁻¹b). With the
+"""CPO against OmniSafe 0.5.0's own step (tests/fixtures/golden/README.md), four times on the
+same weights and batch with Jc chosen for three of its cases and a backtracking line search:
+``case2`` (c < 0, the boundary cuts the trust region: [O]'s dual gives λ* < 0 and all 20 fractions
+are rejected), ``case1`` (θ_old infeasible, a feasible part in reach: ν* > 0), ``case0`` (recovery
+along −H⁻¹b) and ``backtrack`` (case 1, the cost surrogate rises at the first 7 fractions: the 8th,
+0.8⁷, is accepted). With the
 ``omnisafe`` preset (its KL averaged over the action's dimensions, its CG's ε, its dual:
 ``dual_convention="omnisafe"``) every output is OmniSafe's within 1e-5 relative: x = H⁻¹g,
 p = H⁻¹b, q, r, s, A, B, the case, λ*, ν*, the full step, the line search's outcome, the actor.
@@ -22,7 +24,7 @@ from lac_rllib.constrained.trust_region import cpo_step
 from tests.algorithms.golden import assert_matches, load
 from tests.algorithms.golden_trust_region import scenario_outputs, trust_region_step
 
-SCENARIOS = ("case2", "case1", "case0")
+SCENARIOS = ("case2", "case1", "case0", "backtrack")
 
 
 @pytest.fixture(scope="module")
@@ -30,11 +32,12 @@ def fx():
     return load("cpo-omnisafe")
 
 
-def test_the_fixture_takes_three_cases_and_both_line_search_outcomes(fx):
+def test_the_fixture_takes_three_cases_and_every_line_search_outcome(fx):
     out = fx.outputs
-    assert [int(out[f"{s}/optim_case"]) for s in SCENARIOS] == [2, 1, 0]
+    assert [int(out[f"{s}/optim_case"]) for s in SCENARIOS] == [2, 1, 0, 1]
     assert out["case2/lambda_star"] < 0 and out["case2/acceptance_step"] == 0  # [O]'s dual: no step
     assert out["case1/nu_star"] > 0 and out["case1/acceptance_step"] == 1
+    assert out["backtrack/nu_star"] > 0 and out["backtrack/acceptance_step"] == 8  # 7 fractions rejected
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -47,6 +50,7 @@ def test_the_omnisafe_preset_takes_omnisafes_step(fx, scenario):
     ("case1", {"dual_convention": "paper"}, r"\n  case1/nu_star: "),
     ("case0", {"kl_convention": "sum"}, r"\n  case0/nu_star: "),  # half the damping: another p, s
     ("case0", {"cg_eps": 0.0}, r"\n  p: "),
+    ("backtrack", {"backtrack_coeff": 0.64}, r"\n  backtrack/acceptance_step: "),  # 0.8^(2j): the 5th
 ])
 def test_a_perturbed_learner_fails_naming_the_output(fx, scenario, fields, differs):
     with pytest.raises(AssertionError, match=differs):
