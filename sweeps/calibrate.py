@@ -10,6 +10,14 @@ rounded to two significant figures, with 0 first (one of the ``limits``) where a
 cost is reachable there; omnisafe#384: a limit of 0 must work, and does here). It is printed and
 written as a sweep-file snippet (``cost_limits: [...]``).
 
+Beside it, the fixed-multiplier frontier's ν values (``frontier: {algo: ALGO, nu: [...]}``, for the
+regret at each limit): the scale at which the trade-off happens is ν* = (R_free − R_random) /
+C_free, the multiplier at which the unconstrained policy's whole cost weighs as much as its whole
+gain over a random policy (the Lagrangian adds −ν × cost to the return); the proposal is 0 and a
+geometric grid from ν*/16 to 2ν*, so that the costs of the fixed-ν policies spread across the
+ladder and R*(b) can differ between rungs. It is a proposal from two short runs: the ladder's
+report says where two rungs still share one frontier point (sweeps/reports/ladder.py).
+
     lac-sweep calibrate --task lac/PointHazard-v0 [--algo ppo_lag] [--timesteps 20000]
     lac-sweep calibrate --config my_sweep.yaml          # its tasks, a user's env included
 
@@ -41,6 +49,9 @@ class Calibration:
     free_costs: list[float]  # the unconstrained run's mean episode cost per iteration, its tail
     zero_seen: bool  # an episode of either run cost 0
     ladder: list[float]
+    random_returns: list[float] = dataclasses.field(default_factory=list)  # each random episode's return
+    free_returns: list[float] = dataclasses.field(default_factory=list)  # the unconstrained run's, its tail
+    frontier: list[float] = dataclasses.field(default_factory=list)  # the proposed fixed ν values
 
     @property
     def random_cost(self) -> float:
@@ -66,34 +77,47 @@ def propose_ladder(low: float, high: float, limits: int, zero: bool) -> list[flo
     return sorted(set(([0.0] if zero else []) + values))
 
 
-def random_episode_costs(spec, episodes: int, seed: int) -> tuple[list[float], bool]:
+def propose_frontier(gain: float, cost: float, points: int = 6) -> list[float]:
+    """0 and ``points`` fixed ν values, a geometric grid from ν*/16 to 2ν* with ν* = ``gain`` / ``cost``
+    (the module docstring), rounded to two significant figures; [0] alone where the unconstrained run
+    paid no cost or gained nothing (no ν trades anything there)."""
+    if not (math.isfinite(gain) and math.isfinite(cost)) or cost <= 0 or gain <= 0:
+        return [0.0]
+    scale = gain / cost
+    return sorted({0.0, *(round2(scale * 2.0 ** k) for k in np.linspace(-4, 1, points))})
+
+
+def random_episode_costs(spec, episodes: int, seed: int) -> tuple[list[float], bool, list[float]]:
     """Each of ``episodes`` random-action episodes' cost, in the task's convention (seeded: episode
-    i is reset with seed + i), and whether any of them cost 0."""
+    i is reset with seed + i), whether any of them cost 0, and each episode's return."""
     env = spec.make()
     env.action_space.seed(seed)
-    costs = []
+    costs, returns = [], []
     try:
         for i in range(episodes):
             env.reset(seed=seed + i)
-            total, discount, done = 0.0, 1.0, False
+            total, ret, discount, done = 0.0, 0.0, 1.0, False
             while not done:
-                _, _, terminated, truncated, info = env.step(env.action_space.sample())
+                _, reward, terminated, truncated, info = env.step(env.action_space.sample())
                 total += discount * float(info.get("cost", 0.0))
+                ret += float(reward)
                 discount *= spec.episode_cost_discount
                 done = terminated or truncated
             costs.append(total)
+            returns.append(ret)
     finally:
         env.close()
-    return costs, any(c == 0 for c in costs)
+    return costs, any(c == 0 for c in costs), returns
 
 
-def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tuple[list[float], bool]:
+def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tuple[list[float], bool, list[float]]:
     """The mean episode cost of each of the last TAIL of iterations of ``algo`` on ``task`` with ν
-    pinned at 0 (``nu_fixed``) at its quick sizes, and whether an iteration's mean cost was 0."""
+    pinned at 0 (``nu_fixed``) at its quick sizes, whether an iteration's mean cost was 0, and those
+    iterations' mean episode returns."""
     import ray
 
     from lac_rllib.algorithms import registry
-    from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, iteration_row
+    from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, iteration_row
     from lac_rllib.tasks import get_task
 
     sets = {**registry.budget_fields(algo, "quick", get_task(task).preset), "nu_fixed": 0.0}
@@ -114,9 +138,10 @@ def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tupl
     finally:
         if started:
             ray.shutdown()
-    costs = [r[EPISODE_COST] for r in rows if math.isfinite(r[EPISODE_COST])]
-    tail = costs[-max(1, math.ceil(TAIL * len(costs))):]
-    return tail, any(c == 0 for c in tail)
+    rows = [r for r in rows if math.isfinite(r[EPISODE_COST])]
+    tail = rows[-max(1, math.ceil(TAIL * len(rows))):]
+    costs = [r[EPISODE_COST] for r in tail]
+    return costs, any(c == 0 for c in costs), [r[EPISODE_RETURN] for r in tail if math.isfinite(r[EPISODE_RETURN])]
 
 
 def calibrate(task: str, algo: str, timesteps: int, episodes: int, limits: int, seed: int) -> Calibration:
@@ -124,11 +149,13 @@ def calibrate(task: str, algo: str, timesteps: int, episodes: int, limits: int, 
     from lac_rllib.tasks import get_task
 
     spec = get_task(task)
-    rand, rand_zero = random_episode_costs(spec, episodes, seed)
-    free, free_zero = unconstrained_costs(algo, task, timesteps, seed)
+    rand, rand_zero, rand_ret = random_episode_costs(spec, episodes, seed)
+    free, free_zero, free_ret = unconstrained_costs(algo, task, timesteps, seed)
     zero = rand_zero or free_zero
     ladder = propose_ladder(float(np.mean(rand)), float(np.mean(free)), limits, zero)
-    return Calibration(task, algo, rand, free, zero, ladder)
+    gain = float(np.mean(free_ret)) - float(np.mean(rand_ret)) if free_ret and rand_ret else math.nan
+    return Calibration(task, algo, rand, free, zero, ladder, rand_ret, free_ret,
+                       propose_frontier(gain, float(np.mean(free))))
 
 
 def snippet(c: Calibration, timesteps: int) -> str:
@@ -136,7 +163,11 @@ def snippet(c: Calibration, timesteps: int) -> str:
     return (f"# lac-sweep calibrate: {c.task}, a random policy's episodes cost {c.random_cost:.3g} on average, "
             f"{c.algo} with nu pinned at 0 ({timesteps:,} env steps) {c.free_cost:.3g}"
             f"{'; an episode cost 0, so the ladder starts at 0' if c.zero_seen else ''}\n"
-            f"cost_limits: [{', '.join(f'{b:g}' for b in c.ladder)}]\n")
+            f"cost_limits: [{', '.join(f'{b:g}' for b in c.ladder)}]\n"
+            + (f"# the frontier: nu* = (return {np.mean(c.free_returns):.3g} - random {np.mean(c.random_returns):.3g})"
+               f" / cost {c.free_cost:.3g}; 0 and nu*/16 .. 2 nu*\n"
+               f"frontier: {{algo: {c.algo}, nu: [{', '.join(f'{v:g}' for v in c.frontier)}]}}\n"
+               if len(c.frontier) > 1 else ""))
 
 
 def parser() -> argparse.ArgumentParser:

@@ -16,6 +16,14 @@ def test_the_ladder_rises_from_the_low_end_short_of_the_high_one():
     assert calibrate.propose_ladder(2.0, 10.0, 4, zero=False) == [2.0, 4.0, 6.0, 8.0]
     assert calibrate.propose_ladder(10.0, 2.0, 4, zero=True) == [0.0, 2.0, 4.7, 7.3]  # either order; 0 first
     assert calibrate.propose_ladder(3.0, 3.0, 3, zero=False) == [3.0]  # no range: one limit, not three copies
+
+
+def test_the_frontier_spans_the_scale_where_return_and_cost_trade():
+    # gain 11 over a random policy for a cost of 9: nu* = 1.22; the grid 0, nu*/16 .. 2 nu*.
+    nu = calibrate.propose_frontier(11.0, 9.0)
+    assert nu[0] == 0.0 and nu[1] == pytest.approx(11 / 9 / 16, rel=0.03) and nu[-1] == pytest.approx(22 / 9, rel=0.03)  # 2 figures
+    assert len(nu) == 7 and nu == sorted(set(nu))
+    assert calibrate.propose_frontier(11.0, 0.0) == [0.0] and calibrate.propose_frontier(-1.0, 9.0) == [0.0]
     assert calibrate.round2(0.012345) == 0.012 and calibrate.round2(1234.0) == 1200.0
 
 
@@ -40,6 +48,8 @@ def test_calibrate_the_tiny_task(tmp_path, capsys):
                   (text.split("cost ")[1], text.split("(6,000 env steps) ")[1]))
     positive = [b for b in ladder if b > 0]
     assert min(rand, free) * 0.95 <= positive[0] and max(positive) < max(rand, free), (ladder, rand, free)
+    frontier = yaml.safe_load(text)["frontier"]  # the fixed-nu values proposed beside the ladder
+    assert frontier["algo"] == "ppo_lag" and frontier["nu"][0] == 0 and len(frontier["nu"]) >= 2
 
 
 @pytest.mark.slow
