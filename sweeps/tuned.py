@@ -16,7 +16,6 @@ default stands.
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 from sweeps import spaces
@@ -179,20 +178,17 @@ def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
 
 
 def pick_winners(summary, fields_of: dict, k: int) -> list[dict]:
-    """A search's ``k`` best configurations: the feasible ones (sweeps/reports/verdicts.py's rule) by
-    the lower end of their return interval (then the mean), else, where none is feasible, the least
-    costly: every algorithm has a tuned configuration to confirm (it may fail to hold up)."""
-    done = summary[summary["n_seeds"] > 0]
-    ok = done[done["feasible"].astype(bool)]
-    if len(ok):
-        key = ok["return_mean_ci_low"].fillna(-math.inf)
-        order = ok.assign(_k=key).sort_values(["_k", "return_mean"], ascending=False)
-    else:
-        order = done.sort_values(["cost_mean", "return_mean"], ascending=[True, False])
-    return [{"config": r["config"], "fields": fields_of.get(r["config"], {}), "feasible": bool(len(ok)),
+    """A search's ``k`` best configurations (sweeps/reports/verdicts.py ``choose_winners``): the
+    feasible ones by the lower end of their return interval, a sample that is the default among
+    them, else, where none is feasible, the least costly, ``feasible`` False: every algorithm has a
+    tuned configuration to confirm (it may fail to hold up)."""
+    from sweeps.reports.verdicts import choose_winners
+
+    rows = choose_winners(summary, k, fields_of, least_costly_fallback=True, default_competes=True)
+    return [{"config": r["config"], "fields": fields_of.get(r["config"], {}), "feasible": bool(r["feasible"]),
              "search": {c: _plain(r.get(c)) for c in ("return_mean", "return_mean_ci_low", "return_mean_ci_high",
                                                       "cost_mean", "feasible_fraction", "n_seeds")}}
-            for r in order.head(k).to_dict("records")]
+            for r in rows.to_dict("records")]
 
 
 def _plain(v):

@@ -22,6 +22,8 @@ import math
 
 import pandas as pd
 
+from sweeps.reports import verdicts
+
 #: A confirmation group's name: top1 … topK, beside "default" and "baseline-ALGO".
 TOP, DEFAULT_GROUP, BASELINE = "top", "default", "baseline-"
 #: How ``--confirm-by`` picks the winners: the lower end of the return interval, or the worst or
@@ -39,31 +41,17 @@ def varied_fields(sweep) -> list[str]:
 
 
 def rank(summary: pd.DataFrame, k: int) -> pd.DataFrame:
-    """The ``k`` best feasible configurations (sweeps/reports/verdicts.py's rule) that are not the
-    default, by the lower end of their return interval (then the mean: one seed has no interval)."""
-    from sweeps.reports.ladder import FRONTIER_GROUP
-
-    ok = summary[summary["feasible"].astype(bool) & summary["return_mean"].notna() & ~summary["is_default"]
-                 & ~summary["group"].astype(str).eq(FRONTIER_GROUP)]  # a fixed-ν run is the yardstick, not a candidate
-    key = ok["return_mean_ci_low"].fillna(-math.inf)
-    return ok.assign(_low=key).sort_values(["_low", "return_mean"], ascending=False).head(k).drop(columns="_low")
+    """The ``k`` best feasible configurations that are not the default, each row as ranked
+    (sweeps/reports/verdicts.py ``choose_winners``)."""
+    return verdicts.choose_winners(summary, k)
 
 
 def winners(summary: pd.DataFrame, fields_of: dict[str, dict], k: int) -> list[dict]:
-    """The top ``k`` configurations (:func:`rank`) as {label, fields, search: its statistics}.
-    ``fields_of`` maps a configuration's ``config`` label to its varied fields' values; a
-    configuration that ranks at several limits of a ladder is one winner (its best row)."""
-    out, seen = [], set()
-    for r in rank(summary, len(summary)).to_dict("records"):
-        key = _key(fields_of[r["config"]]) if fields_of.get(r["config"]) else r["config"]
-        if key in seen:
-            continue
-        seen.add(key)
-        out.append({"group": f"{TOP}{len(out) + 1}", "config": r["config"], "fields": fields_of.get(r["config"], {}),
-                    "search": _stats(r)})
-        if len(out) == k:
-            break
-    return out
+    """The top ``k`` configurations (verdicts.choose_winners) as {group, config, fields, search: its
+    statistics}. ``fields_of`` maps a configuration's ``config`` label to its varied fields' values;
+    a configuration that ranks at several limits of a ladder is one winner (its best row)."""
+    return [{"group": f"{TOP}{i}", "config": r["config"], "fields": fields_of.get(r["config"], {}), "search": _stats(r)}
+            for i, r in enumerate(verdicts.choose_winners(summary, k, fields_of).to_dict("records"), 1)]
 
 
 def regret_winners(trials: pd.DataFrame, fields_of: dict[str, dict], k: int, by: str) -> list[dict]:
@@ -109,12 +97,6 @@ def with_limits(top: list[dict], trials: pd.DataFrame, table: pd.DataFrame | Non
             "return_mean_ci_high": _plain(r["return_high"]), "cost_mean": _plain(r["cost_mean"]),
             "regret": _plain(r["regret"])} for r in rows.to_dict("records")}
     return top
-
-
-def _key(fields: dict) -> str:
-    import json
-
-    return json.dumps(fields, sort_keys=True, default=str)
 
 
 def _stats(r: dict) -> dict:

@@ -204,6 +204,46 @@ def ordered_with_ties(names, ranks) -> str:
     return out
 
 
+def choose_winners(summary: pd.DataFrame, k: int, fields_of: dict | None = None, *,
+                   least_costly_fallback: bool = False, default_competes: bool = False) -> pd.DataFrame:
+    """The ``k`` configurations a confirmation reruns, best first: the rows of ``summary`` (one per
+    configuration: config, group, feasible, return_mean, return_mean_ci_low, cost_mean, n_seeds,
+    is_default) feasible by this module's rule, by the lower end of their return interval, then
+    their mean (one seed has no interval). The frontier's fixed-ν runs are the yardstick, never a
+    candidate; nor is the default, rerun beside the winners, unless ``default_competes``. With
+    ``fields_of`` (config → its fields' values) a configuration ranked at several limits of a ladder
+    is one winner, its best row. Where none is feasible: no row, or with ``least_costly_fallback``
+    the least costly configurations with a finished seed (then the higher return), their
+    ``feasible`` False: a row is a feasible winner only where the rule says so."""
+    import json
+
+    from sweeps.spaces import FRONTIER_GROUP
+
+    candidates = summary[~summary["group"].astype(str).eq(FRONTIER_GROUP)]
+    if not default_competes:
+        candidates = candidates[~candidates["is_default"].astype(bool)]
+    ok = candidates[candidates["feasible"].astype(bool) & candidates["return_mean"].notna()]
+    if len(ok):
+        order = (ok.assign(_low=ok["return_mean_ci_low"].fillna(-math.inf))
+                 .sort_values(["_low", "return_mean"], ascending=False).drop(columns="_low"))
+    elif least_costly_fallback:
+        done = candidates[pd.to_numeric(candidates["n_seeds"], errors="coerce").fillna(0) > 0]
+        order = done.sort_values(["cost_mean", "return_mean"], ascending=[True, False])
+    else:
+        return ok
+    if fields_of is None:
+        return order.head(k)
+    seen, keep = set(), []
+    for i, config in enumerate(order["config"]):
+        key = json.dumps(fields_of[config], sort_keys=True, default=str) if fields_of.get(config) else config
+        if key not in seen:
+            seen.add(key)
+            keep.append(i)
+        if len(keep) == k:
+            break
+    return order.iloc[keep]
+
+
 # -- the frontier and regret ---------------------------------------------------------------------
 
 def split_seeds(seeds) -> tuple[list, list]:

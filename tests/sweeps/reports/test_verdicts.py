@@ -185,3 +185,30 @@ def test_intervals_by_hand():
     with pytest.raises(ValueError, match="one per seed"):
         verdicts.paired_difference_interval([1, 2], [1])
     assert verdicts.proportion_interval(3, 3)[2] == 1.0 and verdicts.proportion_interval(0, 3)[1] == 0.0
+
+
+def _winner_rows(*rows):
+    """A summary: (config, feasible, return mean, its interval's low end, cost, default, group)."""
+    import pandas as pd
+
+    return pd.DataFrame([{"config": c, "feasible": ok, "return_mean": r, "return_mean_ci_low": lo, "cost_mean": cost,
+                          "is_default": d, "group": g, "n_seeds": 3} for c, ok, r, lo, cost, d, g in rows])
+
+
+def test_winners_are_feasible_by_the_rule_best_lower_end_first_the_frontier_never_the_default_when_asked():
+    rows = _winner_rows(("wide", True, 9.0, 1.0, 1.0, False, "g"), ("narrow", True, 5.0, 4.0, 1.0, False, "g"),
+                        ("over", False, 20.0, 19.0, 9.0, False, "g"), ("default", True, 8.0, 7.0, 0.0, True, "g"),
+                        ("nu", True, 30.0, 29.0, 0.0, False, "frontier"))
+    assert list(verdicts.choose_winners(rows, 5)["config"]) == ["narrow", "wide"]
+    assert list(verdicts.choose_winners(rows, 5, default_competes=True)["config"]) == ["default", "narrow", "wide"]
+    # A ladder's rungs of one configuration (equal fields) are one winner: its best row.
+    fields = {"wide": {"beta": 1}, "narrow": {"beta": 1}}
+    assert list(verdicts.choose_winners(rows, 5, fields)["config"]) == ["narrow"]
+
+
+def test_without_a_feasible_configuration_the_fallback_is_the_least_costly_and_says_it_is_infeasible():
+    rows = _winner_rows(("a", False, 9.0, 8.0, 3.0, False, "g"), ("b", False, 1.0, 0.0, 2.0, False, "g"),
+                        ("c", False, 5.0, 4.0, 2.0, False, "g"))
+    assert verdicts.choose_winners(rows, 2).empty
+    chosen = verdicts.choose_winners(rows, 2, least_costly_fallback=True)
+    assert list(chosen["config"]) == ["c", "b"] and not chosen["feasible"].any()
