@@ -128,8 +128,25 @@ def parent_metrics(summary: pd.DataFrame) -> dict[str, float]:
     return out
 
 
+def best_lines(summary: pd.DataFrame) -> list[str]:
+    """The best feasible configuration, one line; over a ladder of limits one per limit (a
+    configuration is judged at its own limit: returns at different limits do not compare)."""
+    none = "none (no configuration has ≥ 80% of its seeds within the limit)"
+    limits = pd.to_numeric(summary["cost_limit"], errors="coerce")
+    if limits.nunique() < 2:
+        best = best_configuration(summary)
+        return [f"**Best feasible configuration:** {_describe(best) if best else none}"]
+    out = []
+    for b in sorted(limits.dropna().unique()):
+        best = best_configuration(summary[limits == b])
+        out.append(f"**Best feasible configuration at limit {_fmt_value(b)}:** {_describe(best) if best else none}")
+    return out
+
+
 def _describe(cfg: dict) -> str:
-    what = f"{cfg['group']} {cfg['param']}={_fmt_value(cfg['value'])}" if cfg["param"] else cfg["group"]
+    # A group of several algorithms (a ladder's ``algo: [...]``) is named by its configuration's label.
+    what = (f"{cfg['group']} {cfg['param']}={_fmt_value(cfg['value'])}" if cfg["param"] else
+            cfg.get("config") or cfg["group"])
     return (f"{what} on {cfg['task']}: return {_pm(cfg['return_mean'], cfg['return_std'])}, cost "
             f"{_pm(cfg['cost_mean'], cfg['cost_std'])} (limit {_fmt_num(cfg['cost_limit'])}), "
             f"{cfg['n_seeds']} seeds")
@@ -179,12 +196,10 @@ def markdown_table(summary: pd.DataFrame) -> str:
         cols = [r["group"], _what(r), r["task"], _seeds(r), *_stat_cells(r),
                 _pm(r["return_mean"], r["return_std"]), _pm(r["cost_mean"], r["cost_std"]), _fmt_num(r["cost_limit"])]
         lines.append("| " + " | ".join(cell(c) for c in cols) + " |")
-    best = best_configuration(summary)
     comparison = algorithm_comparison(summary)
     lines += ["", f"Scores: {score_text(summary)}. " + seeds_line([int(n) for n in summary["n_seeds"] if n]), ""]
     lines += [comparison] if comparison else []
-    lines.append(f"**Best feasible configuration:** {cell(_describe(best))}" if best else
-                 "**Best feasible configuration:** none (no configuration has ≥ 80% of its seeds within the limit)")
+    lines += [cell(line) for line in best_lines(summary)]
     return "\n".join(lines) + "\n"
 
 
@@ -229,9 +244,7 @@ def note_markdown(summary: pd.DataFrame, heading: str, footer: str = "", limit: 
     """
     tasks = summary["task"].astype(str).unique() if len(summary) else []
     one_task = len(tasks) == 1
-    best = best_configuration(summary)
-    head = [heading, "", (f"**Best feasible configuration:** {_describe(best)}" if best else
-                          "**Best feasible configuration:** none (no configuration has ≥ 80% of its seeds within the limit)"), ""]
+    head = [heading, "", *best_lines(summary), ""]
     if extra:
         head += [extra, ""]
     if one_task:

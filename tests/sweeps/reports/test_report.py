@@ -102,6 +102,16 @@ def test_best_configuration_prefers_feasible_and_none_when_infeasible():
     assert report.best_configuration(report.summarize(hand_table(limit=0.5))) is None
 
 
+def test_over_a_ladder_the_best_is_named_per_limit():
+    """Returns at different limits do not compare: one best per limit, named by its configuration."""
+    ladder = pd.concat([hand_table(limit).assign(config=lambda d, b=limit: d["value"].astype(str) + f"-b{b:g}")
+                        for limit in (25.0, 45.0)], ignore_index=True)
+    lines = report.best_lines(report.summarize(ladder))
+    # At 25: VT 30 (return 20, cost 10); at 45 VT 20 is feasible too (costs 40, 44) and its return 31 leads.
+    assert lines[0].startswith("**Best feasible configuration at limit 25:** VT langevin_steps=30") and len(lines) == 2
+    assert lines[1].startswith("**Best feasible configuration at limit 45:** VT langevin_steps=20")
+
+
 def test_markdown_table():
     s = report.summarize(hand_table())
     md = report.markdown_table(s)
