@@ -6,7 +6,9 @@ learners the same inputs, weights and hyperparameters.
 :func:`on_policy_step` builds an on-policy learner on the fixture's spaces and networks in float64,
 loads the reference's weights, takes the step the reference took (the multiplier's, then one
 minibatch through the learner's own hooks, RLlib's order) and returns what the reference recorded
-under the reference's names; :func:`assert_matches` compares and names every output that differs."""
+under the reference's names (for a fixture with a rollout, also the advantages and value targets
+the learner connector makes of it: :func:`connector_step`); :func:`assert_matches` compares and
+names every output that differs."""
 
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
+from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.constrained.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS
@@ -28,6 +31,10 @@ from lac_rllib.constrained.metrics import COST_VF_LOSS, TS_EPISODE_COSTS
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "golden"
 REQUIRED_META = ("reference", "reference_version", "algorithm", "command")  # benchmarks/golden/fixture.py
 RTOL = 1e-5
+#: The buffer's advantages and targets are float32 on both sides (OmniSafe's buffer, RLlib's
+#: ``compute_value_targets``): compared to 1e-5 relative and, for entries near 0, 2e-6 absolute (a
+#: few float32 ulps of the targets, which reach 30).
+BUFFER_ATOL = 2e-6
 
 
 class FixtureError(ValueError):
@@ -166,6 +173,46 @@ def multiplier_step(learner, fx: Fixture) -> float:
     return nu
 
 
+def rollout_episodes(fx: Fixture) -> list:
+    """The fixture's rollout (``in/rollout/*``, ``meta["rollout_chunks"]``) as the episode chunks an
+    env runner hands the learner: the batch's rows in order, split into chunks, each with the
+    observation after its last row, the step costs in ``info["cost"]`` and the behaviour policy's
+    outputs; a chunk ends terminated, truncated (a time limit) or neither (cut at the batch's end)."""
+    i = fx.inputs
+    spaces = Spaces(i["obs"].shape[1], i["act"].shape[1])
+    dist_inputs = np.concatenate([i["old_mean"], i["old_log_std"]], axis=-1)
+    episodes, start = [], 0
+    for k, (rows, end) in enumerate(fx.meta["rollout_chunks"]):
+        rows_k = slice(start, start + rows)
+        episodes.append(SingleAgentEpisode(
+            observations=[*i["obs"][rows_k], i["rollout/last_obs"][k]],
+            infos=[{"cost": 0.0}] + [{"cost": float(c)} for c in i["rollout/cost"][rows_k]],
+            actions=list(i["act"][rows_k]), rewards=list(i["rollout/reward"][rows_k]),
+            terminated=end == "terminated", truncated=end == "time_limit",
+            extra_model_outputs={Columns.ACTION_DIST_INPUTS: list(dist_inputs[rows_k]),
+                                 Columns.ACTION_LOGP: list(i["logp"][rows_k])},
+            len_lookback_buffer=0, observation_space=spaces.observation_space, action_space=spaces.action_space,
+        ).to_numpy())
+        start += rows
+    return episodes
+
+
+def connector_step(config_cls, fx: Fixture, preset=None, **fields) -> dict:
+    """The learner connector's batch of the fixture's rollout (RLlib's phantom row per chunk and
+    its GAE of the rewards, then the family's cost GAE, which standardises A^R and centres A^C over
+    the real rows: cost_gae.py), its real rows under the names of OmniSafe's buffer: ``buffer/*``.
+    On a learner of its own holding the fixture's weights in float32: RLlib's connector hands the
+    module float32 tensors whatever the episodes hold (as in training)."""
+    learner = build_on_policy(config_cls, fx, preset, **fields)
+    learner.module[DEFAULT_MODULE_ID].unwrapped().float()
+    batch = learner._learner_connector(rl_module=learner.module, batch={}, episodes=rollout_episodes(fx),
+                                       shared_data={}, metrics=learner.metrics)[DEFAULT_MODULE_ID]
+    real = np.asarray(batch[Columns.LOSS_MASK], bool)
+    columns = {"adv_r": Postprocessing.ADVANTAGES, "adv_c": COST_ADVANTAGES,
+               "target_value_r": Postprocessing.VALUE_TARGETS, "target_value_c": COST_VALUE_TARGETS}
+    return {f"buffer/{name}": np.asarray(batch[column], np.float64)[real] for name, column in columns.items()}
+
+
 def on_policy_step(config_cls, fx: Fixture, preset=None, **fields) -> dict:
     """The fixture's step taken by the project's learner; its outputs under the reference's names:
     ``nu``, ``loss_pi`` (the policy's whole loss, a penalty term included), the critics' losses
@@ -174,6 +221,7 @@ def on_policy_step(config_cls, fx: Fixture, preset=None, **fields) -> dict:
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()
     config = learner.config.get_config_for_module(DEFAULT_MODULE_ID)
     reverse = {v: k for k, v in OMNISAFE_ON_POLICY.items()}
+    buffered = connector_step(config_cls, fx, preset, **fields) if "rollout/reward" in fx.inputs else {}
     l2 = {net: config.critic_l2 * sum(float((p.detach() ** 2).sum()) for n, p in module.named_parameters()
                                       if ours(n, reverse).startswith(net)) for net in ("reward_critic", "cost_critic")}
     nu = multiplier_step(learner, fx)
@@ -184,4 +232,4 @@ def on_policy_step(config_cls, fx: Fixture, preset=None, **fields) -> dict:
            "loss_cost_critic": peek(COST_VF_LOSS) + l2["cost_critic"]}
     out.update({f"grad/{ours(n, reverse)}": g.numpy() for n, g in grads.items()})
     out.update({f"after/{ours(n, reverse)}": p.detach().numpy() for n, p in module.named_parameters()})
-    return out
+    return {**out, **buffered}
