@@ -17,7 +17,6 @@ from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from sweeps import spaces, sweep_file
 from sweeps.estimate import estimate
 from sweeps.infra import Infra, check_optuna_study, default_optuna_storage
-from sweeps.record import SWEEP_FILE, parent_run_id
 from sweeps.resolve import user_algos
 from sweeps.spaces import TrialSpec
 from sweeps.sweep_file import SweepFile
@@ -279,39 +278,16 @@ def check_confirm(plan: Plan, top: int, seeds: int | None, budget: str | int | N
     return top, seeds or max(len(plan.seeds), 3), budget, by
 
 
-def confirmation_plan(plan: Plan, sweep_dir: Path) -> Plan | None:
+def confirmation_plan(plan: Plan) -> Plan | None:
     """``--confirm-top``: the plan of the confirmation that follows the finished sweep ``plan``: its
-    K best feasible configurations (read back from MLflow, ranked by the lower end of their return
-    interval, or by their worst or mean regret over a ladder) beside the default and the baselines
-    the sweep ran, on fresh seeds, as the sweep NAME-confirm (sweeps/reports/confirm.py). None: no
-    feasible configuration but the default."""
-    from sweeps.reports import confirm
-    from sweeps.reports.report import summarize
-    from sweeps.reports.results import sweep_results
-    from sweeps.tracking import SweepTracker
+    K best feasible configurations (or least regret over a ladder) beside the default and the
+    baselines the sweep ran, on fresh seeds, as the sweep NAME-confirm (sweeps/followup.py
+    ``confirm_top``). None: no feasible configuration but the default."""
+    from sweeps.followup import CONFIRM, confirm_top, confirmation_infra
 
-    k, seeds, budget, by = (*plan.confirm, confirm.BY_RETURN)[:4]
-    # Over several algorithms (``algo: [...]``) a configuration is also its algorithm.
-    fields = [*confirm.varied_fields(plan.sweep), *(["algo"] if len(plan.sweep.algo) > 1 else [])]
-    tracker = SweepTracker(plan.tracking_uri, plan.experiment)
-    trials, _ = sweep_results(tracker, parent_run_id(sweep_dir), tuple(fields))
-    fields_of = {r["config"]: {f: r[f] for f in fields if f in r and not _missing(r[f])}
-                 for r in trials.to_dict("records")}
-    if not len(trials):
-        top = []
-    elif by == confirm.BY_RETURN:
-        top = confirm.with_limits(confirm.winners(summarize(trials), fields_of, k), trials)
-    else:
-        top = confirm.regret_winners(trials, fields_of, k, by)
-    if not top:
+    found = confirm_top(plan)
+    if found is None:
         return None
-    name = f"{plan.name}-confirm"
-    # The baselines the sweep ran (besides its own algorithm) rerun at their defaults beside the winners.
-    baselines = tuple(a for a in dict.fromkeys(trials["algo"]) if a not in plan.sweep.algo and a != DEFAULT_ALGO)
-    cfile = confirm.confirmation_file(plan.sweep, top, seeds, budget, name, baselines)
-    infra = dataclasses.replace(plan.infra, resume=(Path(plan.storage) / name / SWEEP_FILE).exists())
-    return dataclasses.replace(plan_sweep(cfile, "confirm", infra), confirms=tuple(top))
-
-
-def _missing(v) -> bool:
-    return v is None or (isinstance(v, float) and v != v)
+    cfile, top = found
+    infra = confirmation_infra(plan.infra, plan.storage, cfile.name)
+    return dataclasses.replace(plan_sweep(cfile, CONFIRM, infra), confirms=tuple(top))

@@ -291,7 +291,7 @@ def run_confirmation(plan: Plan, sweep_dir: Path) -> int:
     """``--confirm-top``: the finished sweep's confirmation (sweeps/plan.py ``confirmation_plan``),
     printed, then run as the sweep NAME-confirm with its own parent run, whose note says whether
     each winner held up; the sweep's parent run names it."""
-    confirmation = confirmation_plan(plan, sweep_dir)
+    confirmation = confirmation_plan(plan)
     if confirmation is None:
         print("confirmation: no feasible configuration other than the default to confirm", flush=True)
         return 0

@@ -18,14 +18,14 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from sweeps import spaces
+from sweeps import followup, spaces
 from sweeps.plan import Plan, plan_sweep
 from sweeps.record import SWEEP_FILE
 from sweeps.reports.tuned import DEFAULT, TUNED
 from sweeps.seeds import fresh_seeds, seeds_text
 from sweeps.sweep_file import SweepFile, check_fields
 
-TUNE, CONFIRM = "tune", "confirm"
+TUNE = "tune"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,7 +145,8 @@ def print_tuned_plan(tp: TunedPlan) -> None:
         print(f"  {algo:>10}: {_budget_text((n, seeds, steps))} = {n * seeds * steps:,} env steps, "
               f"~{p.estimated_cpu_h:.2f} CPU-hours (its speed), search over {', '.join(p.sweep.search)}")
     print(f"  then: each algorithm's best {t.top} beside its default on {t.confirm_seeds} fresh seeds "
-          f"({seeds_text(fresh_of(tp))}: sweeps/seeds.py), all in one confirmation '{tp.name}-{CONFIRM}'")
+          f"({seeds_text(fresh_of(tp))}: sweeps/seeds.py), all in one confirmation "
+          f"'{followup.confirmation_name(tp.name)}'")
     from sweeps.tuned_registry import destination
 
     where, why = destination(tp)
@@ -157,24 +158,26 @@ def print_tuned_plan(tp: TunedPlan) -> None:
 def fresh_of(tp: TunedPlan) -> tuple[int, ...]:
     """The confirmation's fresh seeds: none of their random streams any search's seeds drew from
     (sweeps/seeds.py)."""
-    return fresh_seeds({s for p in tp.searches.values() for s in p.seeds}, tp.sweep.tune.confirm_seeds)
+    return fresh_seeds(_search_seeds(tp), tp.sweep.tune.confirm_seeds)
+
+
+def _search_seeds(tp: TunedPlan) -> set[int]:
+    return {s for p in tp.searches.values() for s in p.seeds}
 
 
 def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
     """One sweep of every algorithm's winners (``ALGO-tunedK``) and default (``ALGO-default``) on the
-    fresh seeds (:func:`fresh_of`), at the same budget."""
+    fresh seeds (:func:`fresh_of`), at the same budget (sweeps/followup.py ``build_confirmation``)."""
     groups = {}
     for algo, tops in winners.items():
         own = dict(tp.searches[algo].sweep.set)  # the sweep's set and its groups' (a table's preset)
         for k, w in enumerate(tops, 1):
             groups[f"{algo}-{TUNED}{k}"] = {"set": {**own, "algo": algo, **w["fields"]}}
         groups[f"{algo}-{DEFAULT}"] = {"set": {**own, "algo": algo}}
-    data = tp.sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name",
-                                                            "seeds", "searcher", "num_samples", "description", "set"})
-    data["task"] = [tp.task]
-    return SweepFile.model_validate({**data, "groups": groups, "name": f"{tp.name}-{CONFIRM}", "searcher": "grid",
-                                     "seeds": {"list": fresh_of(tp)},
-                                     "description": f"confirmation of {tp.name}: each algorithm tuned and default"})
+    return followup.build_confirmation(
+        tp.sweep, groups, _search_seeds(tp), tp.sweep.tune.confirm_seeds, tp.sweep.budget,
+        followup.confirmation_name(tp.name), f"confirmation of {tp.name}: each algorithm tuned and default",
+        drop=("algo", "set"), task=tp.task)
 
 
 def pick_winners(summary, fields_of: dict, k: int) -> list[dict]:
@@ -195,18 +198,6 @@ def _plain(v):
     return v.item() if hasattr(v, "item") else v
 
 
-def search_results(plan: Plan):
-    """A finished sweep's trials (with its searched fields) and summary, read back from MLflow."""
-    from sweeps.record import parent_run_id
-    from sweeps.reports.report import summarize
-    from sweeps.reports.results import sweep_results
-    from sweeps.tracking import SweepTracker
-
-    tracker = SweepTracker(plan.tracking_uri, plan.experiment)
-    trials, _ = sweep_results(tracker, parent_run_id(Path(plan.storage) / plan.name), tuple(plan.sweep.search or ()))
-    return trials, summarize(trials)
-
-
 def run_tuned(tp: TunedPlan, run_locked) -> int:
     """Each algorithm's search, then the joint confirmation, then the report and the registry
     (``run_locked``: sweeps/run.py's, running one plan into its directory under its lock). A search
@@ -224,17 +215,17 @@ def run_tuned(tp: TunedPlan, run_locked) -> int:
             rc = run_locked(plan, checked_sweep_dir(plan))
             if rc != 0:
                 return rc
-        trials, summary = search_results(plan)
-        fields_of = {r["config"]: {f: r[f] for f in plan.sweep.search if f in r} for r in trials.to_dict("records")}
-        winners[algo] = pick_winners(summary, fields_of, tp.sweep.tune.top)
+        searched_fields = plan.sweep.search or ()
+        trials, summary = followup.read_back(plan, searched_fields)
+        winners[algo] = pick_winners(summary, followup.fields_of(trials, searched_fields), tp.sweep.tune.top)
         searched[algo] = (trials, summary, plan.timesteps)
         if not winners[algo]:
             print(f"tune: {algo}'s search finished no configuration; nothing to confirm", flush=True)
             return 1
     cfile = confirmation_sweep(tp, winners)
     first = next(iter(tp.searches.values()))
-    infra = dataclasses.replace(first.infra, resume=(Path(first.storage) / cfile.name / SWEEP_FILE).exists())
-    confirmation = plan_sweep(cfile, CONFIRM, infra)
+    infra = followup.confirmation_infra(first.infra, first.storage, cfile.name)
+    confirmation = plan_sweep(cfile, followup.CONFIRM, infra)
     if not _finished(confirmation, Path(confirmation.storage) / confirmation.name):
         rc = run_locked(confirmation, checked_sweep_dir(confirmation))
         if rc != 0:
@@ -242,7 +233,7 @@ def run_tuned(tp: TunedPlan, run_locked) -> int:
     from sweeps.reports import tuned as report
     from sweeps.tuned_registry import write_entries
 
-    trials, _ = search_results(confirmation)
+    trials, _ = followup.read_back(confirmation)
     comparison = report.comparison(searched, winners, trials)
     text = report.markdown(tp, comparison)
     tracker = SweepTracker(confirmation.tracking_uri, confirmation.experiment)

@@ -198,10 +198,10 @@ def destination(tp) -> tuple[Path, str | None]:
     """Where a tuned comparison writes its entries, and why there where it is not its registry: a
     ``smoke`` comparison writes into a registry only when ``--registry`` names one."""
     if str(tp.sweep.budget) == SMOKE and not tp.registry_asked:
-        from sweeps.tuned import CONFIRM
+        from sweeps.followup import confirmation_name
 
         first = next(iter(tp.searches.values()))
-        return (Path(first.storage) / f"{tp.name}-{CONFIRM}" / "registry",
+        return (Path(first.storage) / confirmation_name(tp.name) / "registry",
                 f"a {SMOKE} budget writes into a registry only when --registry names one")
     return Path(tp.registry), None
 

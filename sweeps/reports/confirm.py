@@ -2,10 +2,10 @@
 
 A search's winner is the best of many noisy draws, so its score is biased upward (the winner's
 curse; rl-baselines3-zoo#314, #323: tuned scores that do not reproduce). ``--confirm-top K``
-ranks the finished sweep's mean-feasible configurations by the **lower bound** of their return
+ranks the finished sweep's feasible configurations by the **lower bound** of their return
 interval (a configuration backed by consistent seeds beats a lucky one), reruns the top K beside
-the default configuration on fresh seeds (after the sweep's largest) at the same or a larger
-budget, as a second sweep with its own parent run, and says of each whether it held up: its
+the default configuration on fresh seeds at the same or a larger budget, as a second sweep with
+its own parent run (built by sweeps/followup.py), and says of each whether it held up: its
 confirmed mean return is at least the lower end of its search interval, and it stays within the
 limit.
 
@@ -102,26 +102,6 @@ def with_limits(top: list[dict], trials: pd.DataFrame, table: pd.DataFrame | Non
 def _stats(r: dict) -> dict:
     return {c: _plain(r.get(c)) for c in ("return_mean", "return_mean_ci_low", "return_mean_ci_high", "cost_mean",
                                           "n_seeds")}
-
-
-def confirmation_file(sweep, top: list[dict], seeds: int, budget, name: str, baselines: tuple[str, ...] = ()):
-    """The confirmation sweep: one group per winner (its fields as the group's ``set``), the
-    default and the ``baselines`` the sweep ran (each algorithm's own defaults, group
-    ``baseline-ALGO``), on ``seeds`` fresh seeds (sweeps/seeds.py: no env, global or evaluation
-    stream of the sweep's seeds), at ``budget``."""
-    from sweeps.seeds import fresh_seeds
-    from sweeps.sweep_file import SweepFile
-
-    # A sweep of several algorithms (``algo: [...]``): each winner names its own, and there is no one default.
-    several = len(sweep.algo) > 1
-    groups = {w["group"]: {"set": w["fields"]} for w in top} | ({} if several else {DEFAULT_GROUP: {}})
-    groups |= {f"{BASELINE}{algo}": {"set": {"algo": algo}} for algo in baselines}
-    data = sweep.model_dump(exclude_none=True, exclude={"search", "grid", "groups", "groups_at", "searcher",
-                                                          "num_samples", "name", "seeds", "budget",
-                                                          *(("algo",) if several else ())})
-    return SweepFile.model_validate({**data, "groups": groups, "budget": budget, "name": name,
-                                     "seeds": {"list": fresh_seeds(sweep.seed_list(), seeds)},
-                                     "searcher": "grid", "description": f"confirmation of {sweep.name}"})
 
 
 def held_up(search: dict, confirmed: dict) -> bool:

@@ -219,6 +219,8 @@ def choose_winners(summary: pd.DataFrame, k: int, fields_of: dict | None = None,
 
     from sweeps.spaces import FRONTIER_GROUP
 
+    if summary.empty:  # a sweep that finished no trial
+        return summary
     candidates = summary[~summary["group"].astype(str).eq(FRONTIER_GROUP)]
     if not default_competes:
         candidates = candidates[~candidates["is_default"].astype(bool)]

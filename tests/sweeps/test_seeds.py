@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 
 from sweeps import seeds, sweep_file
-from sweeps.reports import confirm
+from sweeps.followup import confirmation_file
 from sweeps.tuned import TunedPlan, confirmation_sweep
 
 SEARCH = (0, 1, 2)
@@ -19,7 +19,7 @@ def _confirmation_seeds(envs: int, runners: int, count: int = 5) -> dict[str, tu
     text = f"task: lac/PointHazard-v0\nbudget: smoke\nseeds: 3\nset: {{num_envs_per_env_runner: {envs}}}\n"
     sweep = sweep_file.load("x.yaml", text)
     top = [{"group": "top1", "config": "c", "fields": {"beta": 1.0}, "search": {}}]
-    plain = confirm.confirmation_file(sweep, top, count, "smoke", "x-confirm").seed_list()
+    plain = confirmation_file(sweep, top, count, "smoke", "x-confirm").seed_list()
     tuned = sweep_file.load("t.yaml", text + f"algo: [lac, ppo_lag]\ntune: {{seeds: 3, confirm_seeds: {count}}}\n")
     search = SimpleNamespace(seeds=SEARCH, sweep=SimpleNamespace(set={}), tasks=("lac/PointHazard-v0",))
     tp = TunedPlan(sweep=tuned, searches={"lac": search, "ppo_lag": search}, registry=Path("registry"))

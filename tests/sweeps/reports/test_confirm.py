@@ -11,6 +11,7 @@ from mlflow.tracking import MlflowClient
 
 from sweeps import run as cli
 from sweeps import sweep_file
+from sweeps.followup import confirmation_file
 from sweeps.reports import confirm
 
 
@@ -79,7 +80,7 @@ def test_the_confirmation_reruns_the_winners_the_default_and_the_baselines_on_fr
                                       "groups:\n  compare: {grid: {algo: [lac, ppo_lag]}}\n"
                                       "  T: {grid: {langevin_steps: [5, 9]}}\n")
     top = [{"group": "top1", "config": "T-langevin_steps=9", "fields": {"langevin_steps": 9}, "search": {}}]
-    c = confirm.confirmation_file(sweep, top, 3, "quick", "x-confirm", baselines=("ppo_lag",))
+    c = confirmation_file(sweep, top, 3, "quick", "x-confirm", baselines=("ppo_lag",))
     # fresh in every stream: 1,000 apart, from the first multiple at least 1,000 past the largest (sweeps/seeds.py)
     assert c.seed_list() == (2000, 3000, 4000) and c.budget == "quick" and c.name == "x-confirm"
     assert {g: dict(grp.set) for g, grp in c.groups.items()} == {
@@ -130,7 +131,7 @@ def test_a_confirmation_of_several_algorithms_runs_each_winners_own_and_no_defau
     sweep = sweep_file.load("x.yaml", "task: lac/PointHazard-v0\nalgo: [ppo_lag, sac_lag]\nbudget: smoke\n"
                                       "seeds: 2\ncost_limits: [0, 2]\nfrontier: {algo: ppo_lag, nu: [0, 1]}\n")
     top = [{"group": "top1", "config": "sac_lag-b0", "fields": {"algo": "sac_lag"}, "search": {}}]
-    c = confirm.confirmation_file(sweep, top, 3, "smoke", "x-confirm")
+    c = confirmation_file(sweep, top, 3, "smoke", "x-confirm")
     assert {g: dict(grp.set) for g, grp in c.groups.items()} == {"top1": {"algo": "sac_lag"}}
     assert c.algo == ("lac",) and c.cost_limits == (0.0, 2.0) and c.frontier.nu == (0.0, 1.0)  # rerun beside it
 
