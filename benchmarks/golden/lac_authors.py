@@ -30,6 +30,11 @@ second argument and the value of each ``F.mse_loss``), the chain's end points
 (``LangevinPolicy.forward``'s result), log π_φ(ã|s') of the actor loss, the gradients each
 optimizer stepped on (after the actor's clip), and the norms their ``clip_grad_norm_`` saw (in
 meta: whether each clip bound).
+The update is recorded twice from the same weights and noise: as [C] trains (gym 0.21's ``done``
+stored in ``terminals``: a time-limit truncation ends the target's bootstrap) and, under
+``bootstrap/``, with only the terminated rows in ``terminals``, as [C]'s update reads a buffer of a
+gymnasium env whose truncations are not terminal: its targets then bootstrap past a truncation,
+as the project's default (``bootstrap_on_truncation=True``) does.
 Written to tests/fixtures/golden/lac-authors.npz (benchmarks/golden/fixture.py)."""
 
 from __future__ import annotations
@@ -195,14 +200,14 @@ def weights(agent) -> dict:
     return {f"{net}.{k}": v.detach().clone() for net in NETS for k, v in getattr(agent, net).state_dict().items()}
 
 
-def record(ref: Path, out_dir: Path) -> Path:
-    torch.set_default_dtype(torch.float64)
-    main, models = import_reference(ref)
+#: The recorded updates: output prefix → the rows [C]'s ``terminals`` marks (module docstring).
+SCENARIOS = {"": ("terminated", "truncated"), "bootstrap/": ("terminated",)}
+
+
+def update(main, models, rollout: dict, noise: np.ndarray) -> tuple[dict, dict, "Tap"]:
+    """[C]'s update from the seeded weights: (the weights before, what it computed, the tap)."""
     agent = build(main, models)
     before = weights(agent)
-    rng = np.random.default_rng(SEED)
-    inputs, rollout = make_rollout(rng)
-    noise = rng.normal(size=(ROWS // MB, C["langevin_steps"] + 1, MB, ACT))
     with Tap(main, models, agent, noise) as tap:
         agent.update_params(ITERATION, rollout, torch.float64, torch.device("cpu"))
     assert tap.used == noise.shape[0] * noise.shape[1], "not all the recorded noise was drawn"
@@ -217,6 +222,24 @@ def record(ref: Path, out_dir: Path) -> Path:
         for g in grads:
             out.update({f"mb{k}/grad/{n}": v for n, v in g.items()})
     out.update({f"after/{k}": v for k, v in weights(agent).items()})
+    return before, out, tap
+
+
+def record(ref: Path, out_dir: Path) -> Path:
+    torch.set_default_dtype(torch.float64)
+    main, models = import_reference(ref)
+    rng = np.random.default_rng(SEED)
+    inputs, rollout = make_rollout(rng)
+    noise = rng.normal(size=(ROWS // MB, C["langevin_steps"] + 1, MB, ACT))
+    out, taps, before = {}, {}, None
+    for prefix, done in SCENARIOS.items():
+        terminals = np.logical_or.reduce([inputs[d] for d in done])
+        fresh = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in rollout.items()}
+        before_k, out_k, taps[prefix] = update(main, models, {**fresh, "terminals": terminals[:, None]}, noise)
+        assert before is None or all(torch.equal(before[k], before_k[k]) for k in before)
+        before = before_k
+        out.update({f"{prefix}{k}": v for k, v in out_k.items()})
+    tap = taps[""]
     commit = subprocess.run(["git", "-C", str(ref), "rev-parse", "HEAD"], capture_output=True, text=True,
                             check=True).stdout.strip()
     chain_norms = [n for bound, n in tap.clip_norms if bound == C["act_grad_norm"]]
@@ -233,7 +256,12 @@ def record(ref: Path, out_dir: Path) -> Path:
             "chain_clip_bound_steps": [int(sum(n > C["act_grad_norm"] for n in norms))  # per minibatch, of T
                                        for norms in np.split(np.array(chain_norms), ROWS // MB)],
             "chain_grad_norm_range": [min(chain_norms), max(chain_norms)],
-            "actor_grad_norm_before_clip": actor_norms}
+            "actor_grad_norm_before_clip": actor_norms,
+            "scenarios": {prefix.rstrip("/") or "as_trained": {"terminals": list(done)}
+                          for prefix, done in SCENARIOS.items()},
+            "bootstrap_chain_clip_bound_steps": [
+                int(sum(n > C["act_grad_norm"] for n in norms)) for norms in np.split(np.array(
+                    [n for bound, n in taps["bootstrap/"].clip_norms if bound == C["act_grad_norm"]]), ROWS // MB)]}
     inputs = {**inputs, "noise": noise, "ep_cost": EP_COST, "nu_before": NU0, "nu_max_before": NU_MAX0}
     return fixture.save(out_dir / "lac-authors.npz", meta, inputs, before, out)
 

@@ -11,11 +11,22 @@ step, the actor's maximum-likelihood step and Polyak of every target; then the n
 The learner takes it through its own hooks in RLlib's order (``before_gradient_based_update``, per
 minibatch forward_train / compute_losses / compute_gradients / postprocess_gradients /
 apply_gradients, ``after_gradient_based_update``), with the chain's noise given through
-``LACTorchRLModule.langevin(noise=...)``."""
+``LACTorchRLModule.langevin(noise=...)``.
+
+The project's default path is checked too: the fused chain (``langevin_fused=True``, compiled by
+torch.compile) and targets that bootstrap past a time-limit truncation (``bootstrap_on_truncation``)
+against the fixture's ``bootstrap/`` update, [C]'s own update on the same buffer with only the
+terminated rows in its ``terminals`` (its code has no fused chain; β > 0, which it also lacks, is
+eq. (16) below). The fused chain multiplies in float32 by construction (energy.make_grad_fn's
+matmul dtype, energy._mm's cast of each product); :func:`fused_in_float64` lifts those two and
+nothing else, and at the recorded inputs that chain equals the eager one to 1e-12: end points,
+energies (where 1/λ and ν/λ enter), gradient norms, clip fractions."""
 
 from __future__ import annotations
 
+import contextlib
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -24,6 +35,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
+from lac_rllib.algorithms.lac import energy
 from lac_rllib.algorithms.lac import module as M
 from lac_rllib.algorithms.lac.config import LACConfig
 from lac_rllib.algorithms.lac.learner import critic_targets
@@ -44,6 +56,11 @@ AUTHORS_FIELDS = dict(
 #: already normalised, as [C]'s buffer is) and the eager chain (the fused one runs in float32).
 SHAPE = dict(actor_hidden=tuple(FX.meta["actor_hidden"]), critic_hidden=tuple(FX.meta["critic_hidden"]),
              obs_normalization=False, langevin_fused=False)
+#: The project's defaults where [C]'s update can take them: the fused chain, targets that bootstrap
+#: past a truncation (the fixture's ``bootstrap/`` update); the other fields as AUTHORS_FIELDS.
+DEFAULT_PATH = dict(langevin_fused=True, bootstrap_on_truncation=True)
+#: What the chain returns besides its end points, compared between the fused and eager chains.
+CHAIN_DIAGNOSTICS = ("energy_start", "energy_end", "grad_norm", "clip_fraction", "at_bound")
 # [C]'s layers → ours: GaussianPolicy (mlp_net, mean_layer, logstd_layer) → GaussianActor.mean_net,
 # log_std; the twin Critics (q1_model, q2_model: Linear at 0, 2, 4, 6) → the ensemble's members
 # [Q_R1, Q_R2, Q_C1, Q_C2], layer k's weight transposed (E, in, out), bias (E, 1, out).
@@ -127,7 +144,7 @@ def minibatch(k: int) -> dict:
 
 
 def forward(learner, k: int):
-    """forward_train of minibatch k with the recorded chain noise; (batch, fwd_out, chain end points)."""
+    """forward_train of minibatch k with the recorded chain noise; (batch, fwd_out, the chain's result)."""
     module = learner.module[MID].unwrapped()
     noise = torch.as_tensor(FX.inputs["noise"][k])
     chains = []
@@ -143,7 +160,7 @@ def forward(learner, k: int):
     finally:
         del module.langevin
     assert len(chains) == 1, "one chain per minibatch (actor_chain_at='next', as [C])"
-    return batch, fwd, chains[0].action
+    return batch, fwd, chains[0]
 
 
 def update(**fields) -> dict:
@@ -155,7 +172,9 @@ def update(**fields) -> dict:
     out = {"nu": float(module.nu)}
     names = {id(p): n for n, p in module.named_parameters()}
     for k in range(len(FX.inputs["noise"])):
-        batch, fwd, chain = forward(learner, k)
+        batch, fwd, result = forward(learner, k)
+        chain = result.action
+        out.update({f"mb{k}/chain_{name}": getattr(result, name).numpy() for name in CHAIN_DIAGNOSTICS})
         losses = learner.compute_losses(fwd_out=fwd, batch={MID: batch})
         grads = learner.postprocess_gradients(learner.compute_gradients(losses))
         stepped = {names[id(p)]: g.detach().clone() for p, g in grads.items() if g is not None}
@@ -175,16 +194,41 @@ def update(**fields) -> dict:
     return out
 
 
-def expected() -> dict:
-    """The fixture's outputs, plus the critics' summed loss (ours logs one critic loss)."""
+def expected(scenario: str = "") -> dict:
+    """The outputs of the fixture's update ``scenario`` ("" as [C] trains, "bootstrap/"), plus the
+    critics' summed loss (ours logs one critic loss)."""
     n = len(FX.inputs["noise"])
-    return {**FX.outputs, **{f"mb{k}/loss_critic": FX.outputs[f"mb{k}/loss_reward_critic"]
-                             + FX.outputs[f"mb{k}/loss_cost_critic"] for k in range(n)}}
+    outputs = {k[len(scenario):]: v for k, v in FX.outputs.items()
+               if k.startswith(scenario) and (scenario or not k.startswith("bootstrap/"))}
+    return {**outputs, **{f"mb{k}/loss_critic": outputs[f"mb{k}/loss_reward_critic"]
+                          + outputs[f"mb{k}/loss_cost_critic"] for k in range(n)}}
+
+
+@contextlib.contextmanager
+def fused_in_float64():
+    """The fused chain with its two float32 steps lifted, the matmuls' input dtype ("float32", the
+    default of ``langevin_dtype``, taken as the weights' float64) and ``_mm``'s cast of each product
+    to float32; everything else is the fused path's own code as the default runs it (torch.compile
+    of energy.energy_and_grad: the selection, the energy with its 1/λ and ν/λ, the backward
+    written out, the Gaussian term)."""
+    with (mock.patch.object(energy, "TORCH_DTYPES", {**energy.TORCH_DTYPES, "float32": torch.float64}),
+          mock.patch.object(energy, "_mm", lambda x, w: torch.bmm(x.to(w.dtype), w))):
+        yield
 
 
 @pytest.fixture(scope="module")
 def ours():
     return update()
+
+
+@pytest.fixture(scope="module")
+def default_path():
+    """The update on the default path (DEFAULT_PATH, the fused chain compiled in float64), and the
+    same update with the eager chain."""
+    with fused_in_float64():
+        fused = update(**DEFAULT_PATH)
+    assert not energy._compile_failed, "torch.compile fell back to eager: the fused chain was not compiled"
+    return fused, update(**{**DEFAULT_PATH, "langevin_fused": False})
 
 
 def test_fixture_names_the_authors_commit():
@@ -196,6 +240,31 @@ def test_reproduces_the_authors_update(ours):
     """Every recorded output (ν, ν_max, each minibatch's chain end points, targets, losses and the
     gradients each optimizer stepped on, every parameter and target after) to 1e-5 relative."""
     assert_matches(ours, expected())
+
+
+def test_the_default_path_reproduces_the_authors_bootstrapped_update(default_path):
+    """The fused chain and bootstrap on truncation against [C]'s update with only the terminated
+    rows terminal: every output to 1e-5 relative. The bootstrap changes mb0's targets on its
+    truncated row (10) only, and everything from mb1 on (its critics stepped on them)."""
+    fused, _ = default_path
+    assert FX.meta["scenarios"]["bootstrap"] == {"terminals": ["terminated"]}
+    assert_matches(fused, expected("bootstrap/"))
+    changed = ~np.isclose(FX.outputs["mb0/y_reward"], FX.outputs["bootstrap/mb0/y_reward"], rtol=1e-9, atol=0)
+    assert list(np.flatnonzero(changed)) == list(np.flatnonzero(FX.inputs["truncated"][:FX.meta["minibatch"]]))
+    with pytest.raises(AssertionError, match="mb0/y_reward"):  # the authors' training semantics differ
+        assert_matches(fused, expected())
+
+
+def test_the_fused_chain_is_the_eager_chain_at_the_recorded_inputs(default_path):
+    """The chains of both minibatches (mb0's at the recorded weights, states, noise and ν; mb1's
+    after the same first step), the fused one compiled: end points, the energy at the start and the
+    end (E = (ν·max Q_C − min Q_R)/λ − log π: the temperature and ν enter here), the gradient's
+    mean norm, the fraction of steps clipped (none in mb0, all in mb1) and at the bounds, to 1e-12
+    relative; the rest of the update to 1e-10."""
+    fused, eager = default_path
+    assert [float(eager[f"mb{k}/chain_clip_fraction"]) for k in (0, 1)] == [0.0, 1.0]
+    assert_matches(fused, eager, rtol=1e-12, atol=1e-14, only=("mb0/chain", "mb1/chain"))
+    assert_matches(fused, eager, rtol=1e-10, atol=1e-14)
 
 
 def test_fixture_exercises_the_chain_clip_and_bounds():
@@ -255,7 +324,8 @@ def test_actor_loss_and_gradient_with_kl_match_eq_16():
     learner = build(beta=beta)
     learner.before_gradient_based_update(timesteps={TS_ITERATION: FX.meta["iteration"],
                                                     TS_MEAN_EPISODE_COST: float(FX.inputs["ep_cost"])})
-    batch, fwd, chain = forward(learner, 0)
+    batch, fwd, result = forward(learner, 0)
+    chain = result.action
     losses = learner.compute_losses(fwd_out=fwd, batch={MID: batch})
     grads = learner.compute_gradients(losses)
     by_id = {id(p): g for p, g in grads.items()}
