@@ -1,5 +1,6 @@
 """The golden fixtures (tests/fixtures/golden/): each names the reference and version that recorded
-it, and the loader refuses one that does not; the comparison names every output that differs."""
+it and the CPU it was recorded on, and the loader refuses one that does not name its reference; the
+comparison names every output that differs."""
 
 import json
 
@@ -9,13 +10,15 @@ import pytest
 from tests.algorithms.golden import FIXTURES, FixtureError, assert_matches, load
 
 
-def test_every_fixture_names_its_reference_version_and_command_and_is_in_the_readme():
+def test_every_fixture_names_its_reference_version_command_and_cpu_and_is_in_the_readme():
     readme = (FIXTURES / "README.md").read_text(encoding="utf-8")
     names = sorted(p.stem for p in FIXTURES.glob("*.npz"))
     assert len(names) >= 4
     for name in names:
         fx = load(name)
         assert fx.meta["reference_version"] and fx.meta["command"]
+        # another CPU rounds the float64 products otherwise: the arrays agree to ~1e-12 (docs/golden.md)
+        assert fx.meta["cpu"]["model_name"] and isinstance(fx.meta["cpu"]["simd_flags"], list), name
         assert f"`{name}.npz`" in readme, f"{name}.npz is not described in tests/fixtures/golden/README.md"
         assert fx.outputs, name
 
