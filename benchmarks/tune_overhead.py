@@ -36,7 +36,7 @@ def main() -> None:
     args = cli.parse_args(["--space", a.space, "--budget", a.budget, "--seeds", "1", "--max-concurrent", "1",
                            "--tracking-uri", f"sqlite:///{tmp / 'mlflow.db'}", "--storage", str(tmp / "ray_results"),
                            "--experiment", "overhead", *(["--task", a.task] if a.task else [])])
-    plan = cli.make_plan(args)
+    plan, = cli.make_plan(args)
     plan = dataclasses.replace(plan, trials=plan.trials[: a.trials], n_trials=min(a.trials, plan.n_trials),
                                concurrency=1)
     ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False, logging_level="ERROR")

@@ -17,6 +17,7 @@ from lac_rllib.algorithms.registry import DEFAULT_ALGO
 from sweeps import spaces, sweep_file
 from sweeps.estimate import estimate
 from sweeps.infra import Infra, check_optuna_study, default_optuna_storage
+from sweeps.record import checked_sweep_dir
 from sweeps.resolve import user_algos
 from sweeps.spaces import TrialSpec
 from sweeps.sweep_file import SweepFile
@@ -94,6 +95,15 @@ class Plan:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
         return out | {"tracking_uri": self.tracking_uri, "budget": self.budget, "seeds": list(self.seeds),
                       "trial_labels": [t.label() for t in self.trials] if self.trials else None}
+
+    def check(self) -> None:
+        """Before Ray starts: the sweep's directory is free, or records this sweep where it resumes."""
+        checked_sweep_dir(self)
+
+    def run(self, run_plan) -> int:
+        """The sweep run by ``run_plan`` (sweeps/run.py's: under its lock, then its confirmation where
+        ``--confirm-top`` asks for one): its exit code."""
+        return run_plan(self, Path(self.storage) / self.name)
 
 
 def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[str, ...] = (),

@@ -16,6 +16,7 @@ import logging
 import os
 import sys
 from pathlib import Path
+from typing import Protocol
 
 from lac_rllib.algorithms.registry import algos_text
 from sweeps import spaces, sweep_file
@@ -23,7 +24,7 @@ from sweeps.estimate import duration_text
 from sweeps.infra import Infra, check_address, check_shared, check_storage
 from sweeps.lock import SweepLocked, sweep_lock
 from sweeps.plan import MAX_TRIALS, Plan, check_confirm, confirmation_plan, plan_sweep
-from sweeps.record import checked_sweep_dir, parent_run_id
+from sweeps.record import parent_run_id
 from sweeps.resolve import module_search_dirs, resolve_sweep
 from sweeps.tracking import CONFIRMED_BY_TAG, SweepTracker, check_reachable, default_tracking_uri
 
@@ -140,11 +141,22 @@ def parse_args(argv=None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def make_plan(args) -> Plan:
-    """The one pass from the command line to the trials: file and flags → the resolved sweep
+class Job(Protocol):
+    """What lac-sweep runs: a sweep's Plan (sweeps/plan.py) or a tuned comparison's TunedPlan
+    (sweeps/tuned.py, one per task)."""
+
+    def check(self) -> None:
+        """Its sweeps' directories checked before Ray starts (a ValueError says what is wrong)."""
+
+    def run(self, run_plan) -> int:
+        """Run it, each sweep by ``run_plan`` (:func:`run_plan`): the exit code."""
+
+
+def make_plan(args) -> list[Job]:
+    """The one pass from the command line to what runs: file and flags → the resolved sweep
     (sweeps/resolve.py) → its trials with their full configs (``spaces.trial_params``) → the
-    estimate and where it goes (sweeps/plan.py ``plan_sweep``). Every input is checked here, before
-    Ray starts."""
+    estimate and where it goes (sweeps/plan.py ``plan_sweep``): one Plan; a sweep file with
+    ``tune:`` one TunedPlan per task. Every input is checked here, before Ray starts."""
     sweep, space, origin = resolve_sweep(args)
     address = args.address or os.environ.get("RAY_ADDRESS") or None
     infra = Infra(address=address, address_from="--address" if args.address else "RAY_ADDRESS" if address else None,
@@ -171,7 +183,7 @@ def make_plan(args) -> Plan:
     if args.confirm_top:
         plan = dataclasses.replace(plan, confirm=check_confirm(plan, args.confirm_top, args.confirm_seeds,
                                                                args.confirm_budget, args.confirm_by))
-    return plan
+    return [plan]
 
 
 def print_plan(plan: Plan) -> None:
@@ -247,28 +259,24 @@ def main(argv=None) -> int:
     # above the plan. Trials run in other processes, where RLlib's own logging is untouched.
     logging.getLogger("ray.rllib.algorithms.algorithm_config").setLevel(logging.ERROR)
     try:
-        plan = make_plan(args)
-        if not isinstance(plan, Plan):  # tuned comparisons (one per task): each search checked before Ray
-            from sweeps.tuned import run_tuned
-
-            for sub in (s for tp in plan for s in tp.searches.values()):
-                if sub.infra.resume or not (Path(sub.storage) / sub.name).exists():
-                    checked_sweep_dir(sub)
-        else:
-            sweep_dir = checked_sweep_dir(plan)
+        jobs = make_plan(args)
+        for job in jobs:  # every sweep's directory checked before Ray starts
+            job.check()
     except ValueError as e:
         print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
-    if not isinstance(plan, Plan):
-        for tp in plan:
-            rc = run_tuned(tp, run_locked)
-            if rc != 0:
-                return rc
-        return 0
+    for job in jobs:
+        rc = job.run(run_plan)
+        if rc != 0:
+            return rc
+    return 0
+
+
+def run_plan(plan: Plan, sweep_dir: Path) -> int:
+    """Run ``plan`` into ``sweep_dir`` (:func:`run_locked`), then its confirmation where it asks for
+    one (``--confirm-top``): the first non-zero exit code, else 0."""
     rc = run_locked(plan, sweep_dir)
-    if rc == 0 and plan.confirm:
-        rc = run_confirmation(plan, sweep_dir)
-    return rc
+    return run_confirmation(plan, sweep_dir) if rc == 0 and plan.confirm else rc
 
 
 def run_locked(plan: Plan, sweep_dir: Path) -> int:

@@ -46,6 +46,19 @@ class TunedPlan:
     def task(self) -> str:
         return next(iter(self.searches.values())).tasks[0]
 
+    def check(self) -> None:
+        """Before Ray starts: each search's directory, except a search's that finished earlier (read
+        back, not run again: :func:`run_tuned`)."""
+        from sweeps.record import checked_sweep_dir
+
+        for plan in self.searches.values():
+            if plan.infra.resume or not (Path(plan.storage) / plan.name).exists():
+                checked_sweep_dir(plan)
+
+    def run(self, run_plan) -> int:
+        """The comparison (:func:`run_tuned`), each sweep run by ``run_plan``: its exit code."""
+        return run_tuned(self, run_plan)
+
 
 def _group_algos(sweep: SweepFile, group) -> tuple[str, ...]:
     """The algorithms a group runs: its grid's over ``algo``, else its set's, else the sweep's."""
@@ -198,9 +211,9 @@ def _plain(v):
     return v.item() if hasattr(v, "item") else v
 
 
-def run_tuned(tp: TunedPlan, run_locked) -> int:
+def run_tuned(tp: TunedPlan, run_plan) -> int:
     """Each algorithm's search, then the joint confirmation, then the report and the registry
-    (``run_locked``: sweeps/run.py's, running one plan into its directory under its lock). A search
+    (``run_plan``: sweeps/run.py's, running one plan into its directory under its lock). A search
     already finished (``--resume`` after a stop) is read back, not run again."""
     from sweeps.record import checked_sweep_dir
     from sweeps.tracking import SweepTracker
@@ -212,7 +225,7 @@ def run_tuned(tp: TunedPlan, run_locked) -> int:
         if _finished(plan, sweep_dir):
             print(f"tune: {plan.name} finished earlier: its results are read back", flush=True)
         else:
-            rc = run_locked(plan, checked_sweep_dir(plan))
+            rc = run_plan(plan, checked_sweep_dir(plan))
             if rc != 0:
                 return rc
         searched_fields = plan.sweep.search or ()
@@ -227,7 +240,7 @@ def run_tuned(tp: TunedPlan, run_locked) -> int:
     infra = followup.confirmation_infra(first.infra, first.storage, cfile.name)
     confirmation = plan_sweep(cfile, followup.CONFIRM, infra)
     if not _finished(confirmation, Path(confirmation.storage) / confirmation.name):
-        rc = run_locked(confirmation, checked_sweep_dir(confirmation))
+        rc = run_plan(confirmation, checked_sweep_dir(confirmation))
         if rc != 0:
             return rc
     from sweeps.reports import tuned as report

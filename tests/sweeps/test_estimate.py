@@ -11,8 +11,9 @@ from sweeps import run as cli
 def _plan(tmp_path, monkeypatch, mode, *argv):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv(estimate.ENV, mode)
-    return cli.make_plan(cli.parse_args(["--space", "ablation", "--storage", str(tmp_path / "rr"),
-                                         "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", *argv]))
+    plan, = cli.make_plan(cli.parse_args(["--space", "ablation", "--storage", str(tmp_path / "rr"),
+                                          "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", *argv]))
+    return plan
 
 
 @pytest.mark.parametrize("scale", [0.5, 2.0])

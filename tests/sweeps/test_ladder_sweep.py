@@ -27,7 +27,7 @@ def _args(tmp_path, *extra, text=LADDER):
 
 
 def test_a_ladder_is_one_trial_per_configuration_limit_and_seed(tmp_path):
-    plan = cli.make_plan(_args(tmp_path))
+    plan, = cli.make_plan(_args(tmp_path))
     ladder = [t for t in plan.trials if t.group != "frontier"]
     frontier = [t for t in plan.trials if t.group == "frontier"]
     assert len(ladder) == 2 * 2 * 2 and len(frontier) == 3 * 2  # algos × limits × seeds; ν values × seeds
@@ -35,7 +35,7 @@ def test_a_ladder_is_one_trial_per_configuration_limit_and_seed(tmp_path):
         (a, b, s) for a in ("ppo_lag", "sac_lag") for b in (0.0, 2.0) for s in (0, 1)}
     assert len({t.config_label() for t in ladder}) == 4  # the limit is part of the configuration
     assert {t.params["nu_fixed"] for t in frontier} == {0.0, 1.0, 4.0} and {t.algo for t in frontier} == {"ppo_lag"}
-    again = cli.make_plan(_args(tmp_path, "--cost-limits", "1,3,5"))  # the flag replaces the file's ladder
+    again, = cli.make_plan(_args(tmp_path, "--cost-limits", "1,3,5"))  # the flag replaces the file's ladder
     assert sorted({t.params["cost_limit"] for t in again.trials if t.group != "frontier"}) == [1.0, 3.0, 5.0]
 
 
@@ -51,7 +51,7 @@ def test_a_bad_ladder_on_the_command_line_is_one_line(tmp_path, argv, needle):
 
 @pytest.mark.slow
 def test_a_ladder_sweep_with_its_frontier_lands_in_mlflow_with_its_report(ray_session, tmp_path):
-    plan = cli.make_plan(_args(tmp_path, "--seeds", "1", text=LADDER.replace("[ppo_lag, sac_lag]", "ppo_lag")))
+    plan, = cli.make_plan(_args(tmp_path, "--seeds", "1", text=LADDER.replace("[ppo_lag, sac_lag]", "ppo_lag")))
     assert len(plan.trials) == 2 + 3  # two limits, three fixed ν
     assert run_sweep(plan, Path(plan.storage) / plan.name, "test-commit") == 0
     client = MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")

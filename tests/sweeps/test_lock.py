@@ -46,7 +46,7 @@ def test_second_driver_is_refused_and_a_dead_ones_lock_is_taken_over(tmp_path):
 def test_two_resume_drivers_at_once(tmp_path):
     base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
-    plan = cli.make_plan(cli.parse_args(base))
+    plan, = cli.make_plan(cli.parse_args(base))
     sweep_dir = Path(plan.storage) / plan.name
     write_record(sweep_dir, plan, "parent-run")
     with DriverLock(sweep_dir):  # the first driver, alive

@@ -16,7 +16,8 @@ FIRST_SCREEN = README.split("---")[0]
 
 def _plan(tmp_path, monkeypatch, *argv):
     monkeypatch.chdir(tmp_path)  # the default MLflow store goes to the working directory
-    return cli.make_plan(cli.parse_args(["--storage", str(tmp_path / "ray_results"), *argv]))
+    plan, = cli.make_plan(cli.parse_args(["--storage", str(tmp_path / "ray_results"), *argv]))
+    return plan
 
 
 def test_the_default_ablation_is_what_the_readme_says(tmp_path, monkeypatch):
@@ -47,7 +48,7 @@ def test_table_3_itself_is_the_paper_budget_and_says_what_it_costs(tmp_path, mon
     args = cli.parse_args(["--space", "ablation", "--task", "SafetyPointGoal1-v0", "--budget", "paper",
                            "--storage", str(tmp_path / "ray_results")])
     monkeypatch.chdir(tmp_path)
-    plan = cli.make_plan(args)
+    plan, = cli.make_plan(args)
     assert (plan.n_trials, plan.timesteps) == (51, 2_500_000)  # Table 3 and the unconstrained arm
     readme_cpu_h = float(re.search(r"~(\d+)\s+CPU-hours by the plan's estimate", README).group(1))
     assert readme_cpu_h == pytest.approx(plan.estimated_cpu_h, rel=0.15)
@@ -290,3 +291,22 @@ def test_an_evaluation_episode_is_counted_at_its_tasks_episode_limit(tmp_path, m
 
     assert eval_s("SafetyPointCircle1-v0") == pytest.approx(500)
     assert eval_s("SafetyPointGoal1-v0") == pytest.approx(1000)
+
+
+def test_a_command_plans_a_list_of_jobs_each_checked_then_run_the_same_way(tmp_path, monkeypatch):
+    """make_plan returns one type, a list of jobs (a sweep's Plan, a tuned comparison's TunedPlan per
+    task): main checks each before Ray starts and runs each through run_plan, whichever it is."""
+    from sweeps.tuned import TunedPlan
+
+    monkeypatch.chdir(tmp_path)
+    ran = []
+    monkeypatch.setattr(cli, "run_locked", lambda plan, sweep_dir: ran.append((plan.name, sweep_dir)) or 0)
+    argv = ["--space", "smoke", "--budget", "smoke", "--seeds", "1", "--storage", str(tmp_path / "rr")]
+    jobs = cli.make_plan(cli.parse_args(argv))
+    assert [type(j).__name__ for j in jobs] == ["Plan"]
+    assert cli.main(argv) == 0 and ran == [(jobs[0].name, Path(jobs[0].storage) / jobs[0].name)]
+    tuned = cli.make_plan(cli.parse_args(["--space", "table1", "--budget", "smoke", "--tune", "2", "--storage",
+                                          str(tmp_path / "rr")]))
+    assert len(tuned) == 4 and all(isinstance(j, TunedPlan) for j in tuned)
+    for job in tuned:
+        job.check()  # no search ran yet: every directory is free

@@ -69,9 +69,9 @@ def test_configurations_at_once_and_the_draws_they_leave_unsteered():
 def _plan_text(tmp_path, capsys, searcher, concurrent, seeds=1):
     (tmp_path / "s.yaml").write_text(f"budget: smoke\nseeds: {seeds}\nnum_samples: 8\nsearcher: {searcher}\n"
                                      f"max_concurrent: {concurrent}\nsearch: {{beta: {{uniform: [0.0, 20.0]}}}}\n")
-    plan = cli.make_plan(cli.parse_args(["--config", str(tmp_path / "s.yaml"), "--experiment", "test",
-                                         "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
-                                         "--storage", str(tmp_path / "rr"), "--name", f"{searcher}{concurrent}"]))
+    plan, = cli.make_plan(cli.parse_args(["--config", str(tmp_path / "s.yaml"), "--experiment", "test",
+                                          "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                                          "--storage", str(tmp_path / "rr"), "--name", f"{searcher}{concurrent}"]))
     capsys.readouterr()
     cli.print_plan(plan)
     return capsys.readouterr().out

@@ -39,7 +39,7 @@ def _runs(tmp_path):
 
 
 def _sweep(tmp_path, args, mutate=None):
-    plan = cli.make_plan(args)
+    plan, = cli.make_plan(args)
     if mutate:
         plan = dataclasses.replace(plan, trials=mutate(plan.trials))
     return run_sweep(plan, Path(plan.storage) / plan.name, "test-commit")
@@ -357,7 +357,7 @@ def test_a_nan_constraint_does_not_kill_the_searcher():
 def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, capsys):
     # The session's Ray has 2 CPUs (as a cluster reached with --address could have): a 3-CPU trial
     # would wait in PENDING forever.
-    plan = cli.make_plan(_args(tmp_path))
+    plan, = cli.make_plan(_args(tmp_path))
     plan = dataclasses.replace(plan, sweep=plan.sweep.model_copy(update={"cpus_per_trial": 3}))
     assert run_sweep(plan, Path(plan.storage) / plan.name, "test-commit") == 2
     assert "--cpus-per-trial 3 is more than the largest node of the Ray cluster has (2 CPUs)" in capsys.readouterr().err
@@ -374,7 +374,7 @@ def test_a_trial_larger_than_any_node_fails_before_tune(ray_session, tmp_path, c
 def test_resume_with_other_settings_is_refused(tmp_path, changed, needle, monkeypatch, capsys):
     from sweeps.record import write_record
 
-    plan = cli.make_plan(_args(tmp_path))
+    plan, = cli.make_plan(_args(tmp_path))
     write_record(Path(plan.storage) / plan.name, plan, "parent-run")
     base = ["--space", "smoke", "--budget", "smoke", "--seeds", "2", "--experiment", "test",
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results")]
@@ -387,7 +387,7 @@ def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monk
     import sweeps.sweep as sweep_mod
 
     args = _args(tmp_path)
-    plan = cli.make_plan(args)
+    plan, = cli.make_plan(args)
     sweep_dir = Path(plan.storage) / plan.name
 
     def broken(*a, **k):
@@ -401,7 +401,7 @@ def test_a_sweep_that_failed_to_start_can_be_resumed(ray_session, tmp_path, monk
     assert parents[0].info.status == "FAILED" and parents[0].data.tags["lac.sweep_status"] == "failed to start"
     assert (sweep_dir / "sweep.json").exists()  # resumable: not "exists" and "no sweep" at once
     args.resume = True
-    assert run_sweep(cli.make_plan(args), sweep_dir, "test-commit") == 0
+    assert run_sweep(cli.make_plan(args)[0], sweep_dir, "test-commit") == 0
     _, parents, children = _runs(tmp_path)
     assert len(parents) == 1 and parents[0].info.status == "FINISHED"  # the same parent run, completed
     assert len(children) == 4 and all(c.info.status == "FINISHED" for c in children)
@@ -420,7 +420,7 @@ def test_asha_stops_a_configurations_seeds_together_after_the_grace_period(ray_s
     args = cli.parse_args(["--config", str(f), "--max-concurrent", "2", "--tracking-uri",
                            f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results"),
                            "--experiment", "test"])
-    plan = cli.make_plan(args)
+    plan, = cli.make_plan(args)
     grace, why, rungs = plan.early_stopping
     # LAC's smoke warm-up: (1 random iteration + 1) × 500 env steps, longer than a quarter of 2,000.
     assert (grace, rungs) == (1000, (1000,)) and "lac's multiplier warm-up" in why, plan.early_stopping
@@ -588,9 +588,9 @@ def test_every_searcher_survives_tunes_pickling(tmp_path, searcher):
 
     (tmp_path / "s.yaml").write_text(f"task: lac/PointHazard-v0\nbudget: smoke\nseeds: 2\nnum_samples: 4\n"
                                      f"searcher: {searcher}\nsearch: {{beta: {{uniform: [0.0, 20.0]}}}}\n")
-    plan = cli.make_plan(cli.parse_args(["--config", str(tmp_path / "s.yaml"),
-                                         "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
-                                         "--storage", str(tmp_path / "rr"), "--experiment", "test"]))
+    plan, = cli.make_plan(cli.parse_args(["--config", str(tmp_path / "s.yaml"),
+                                          "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}",
+                                          "--storage", str(tmp_path / "rr"), "--experiment", "test"]))
     search = cloudpickle.loads(cloudpickle.dumps(search_algorithm(plan)))
     sampler = search.searcher._sampler
     expected = {"random": "RandomSampler", "nsga2": "PicklableNSGAIISampler"}.get(searcher, "TPESampler")

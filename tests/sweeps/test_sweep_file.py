@@ -54,7 +54,8 @@ def legacy_grid(space, task, seeds, budget):
 
 def _plan(tmp_path, monkeypatch, *argv):
     monkeypatch.chdir(tmp_path)
-    return cli.make_plan(cli.parse_args(["--storage", str(tmp_path / "rr"), *argv]))
+    plan, = cli.make_plan(cli.parse_args(["--storage", str(tmp_path / "rr"), *argv]))
+    return plan
 
 
 @pytest.mark.parametrize("space,task,seeds,budget", [

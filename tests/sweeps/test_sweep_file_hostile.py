@@ -189,7 +189,7 @@ def test_a_legal_name_s_state_stays_under_storage(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     path = tmp_path / "ok.yaml"
     path.write_text("name: my-sweep.v2\nbudget: smoke\n")
-    plan = cli.make_plan(cli.parse_args(["--config", str(path), "--storage", str(tmp_path / "rr")]))
+    plan, = cli.make_plan(cli.parse_args(["--config", str(path), "--storage", str(tmp_path / "rr")]))
     assert Path(plan.storage) == (tmp_path / "rr").resolve() and plan.name == "my-sweep.v2"
     assert (Path(plan.storage) / plan.name).resolve().parent == Path(plan.storage)
 
@@ -199,7 +199,7 @@ def test_a_derived_name_is_made_safe(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     path = tmp_path / "my sweep (v2).yaml"
     path.write_text("budget: smoke\n")
-    plan = cli.make_plan(cli.parse_args(["--config", str(path), "--storage", str(tmp_path / "rr")]))
+    plan, = cli.make_plan(cli.parse_args(["--config", str(path), "--storage", str(tmp_path / "rr")]))
     assert plan.name == "my_sweep__v2_-PointHazard-v0-smoke" and sweep_file.check_name(plan.name)
 
 

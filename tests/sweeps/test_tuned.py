@@ -50,11 +50,11 @@ def test_every_algorithm_declares_a_search_space_that_holds_its_defaults(algo):
 
 
 def test_search_default_names_the_space_and_a_file_may_narrow_it(tmp_path):
-    whole = cli.make_plan(_args(tmp_path, "algo: trpo_lag\nbudget: smoke\nsearch: default\nnum_samples: 1\n"))
+    whole, = cli.make_plan(_args(tmp_path, "algo: trpo_lag\nbudget: smoke\nsearch: default\nnum_samples: 1\n"))
     assert set(whole.sweep.search) == {"target_kl", "cg_damping", "lagrangian_lr", "critic_lr"}
     assert whole.sweep.search["target_kl"].loguniform == pytest.approx((0.02 / 3, 0.06))  # around the tiny default
-    narrow = cli.make_plan(_args(tmp_path, "budget: smoke\nnum_samples: 1\nsearch:\n  langevin_steps: default\n"
-                                           "  temperature: {loguniform: [1.0e-4, 1.0e-3]}\n", "--name", "n2"))
+    narrow, = cli.make_plan(_args(tmp_path, "budget: smoke\nnum_samples: 1\nsearch:\n  langevin_steps: default\n"
+                                            "  temperature: {loguniform: [1.0e-4, 1.0e-3]}\n", "--name", "n2"))
     assert narrow.sweep.search["langevin_steps"].int == (10, 100)
     assert narrow.sweep.search["temperature"].loguniform == (1e-4, 1e-3) and len(narrow.sweep.search) == 2
     with pytest.raises(ValueError) as e:
@@ -212,8 +212,8 @@ def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_ses
         assert set(entry["config"] if entry["verdict"] == "improved" else entry["candidate"]) == set(search_space(algo))
         assert isinstance(entry["search_feasible"], bool) and entry["commit_source"].startswith("the search's MLflow")
     # preset: tuned runs each entry: the trial's params are the entry's configuration, or the default.
-    plan = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
-                               "--name", "from-registry"))
+    plan, = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
+                                "--name", "from-registry"))
     for t in plan.trials:
         path, = (registry / "lac/PointHazard-v0" / t.algo).glob("smoke-b2-*.yaml")
         entry = yaml.safe_load(path.read_text())
@@ -253,10 +253,10 @@ PRESET = "algo: ppo_lag\nbudget: smoke\nseeds: 1\npreset: tuned\n"
 
 def test_preset_tuned_reads_a_good_entry(tmp_path):
     _entry(tmp_path)
-    plan = cli.make_plan(_args(tmp_path, PRESET))
+    plan, = cli.make_plan(_args(tmp_path, PRESET))
     assert plan.trials[0].params["lr"] == 0.002 and plan.trials[0].params["clip_param"] == 0.25
     # The sweep's own set wins over the entry (the entry sits where the defaults were).
-    plan = cli.make_plan(_args(tmp_path, PRESET + "set: {lr: 0.004}\n", "--name", "x2"))
+    plan, = cli.make_plan(_args(tmp_path, PRESET + "set: {lr: 0.004}\n", "--name", "x2"))
     assert plan.trials[0].params["lr"] == 0.004 and plan.trials[0].params["clip_param"] == 0.25
     from sweeps.tuned_registry import listing
 

@@ -98,8 +98,8 @@ def test_a_worse_tuned_configuration_writes_that_the_default_stands_and_preset_t
     assert worse["commit_source"].startswith("git HEAD when the entry was written")  # the fake search has no run
     assert "ppo_lag on lac/PointHazard-v0: tuning did not beat the default" in capsys.readouterr().out
     # preset: tuned runs ppo_lag's default, says so in one line naming the entry, and lac's tuned configuration.
-    plan = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
-                               "--name", "from-registry"))
+    plan, = cli.make_plan(_args(tmp_path, "algo: [lac, ppo_lag]\nbudget: smoke\nseeds: 1\npreset: tuned\n",
+                                "--name", "from-registry"))
     out = capsys.readouterr().out
     said = [line for line in out.splitlines() if "verdict default-stands" in line]
     assert len(said) == 1 and str(written[[*entries].index("ppo_lag")]) in said[0], out
@@ -143,7 +143,7 @@ def test_preset_tuned_at_another_limit_is_refused_in_one_line(tmp_path, extra, n
 
 def test_tuned_limit_says_explicitly_which_entry_every_rung_starts_from(tmp_path):
     _entry(tmp_path / "registry", legacy=True)  # the layout both read
-    plan = cli.make_plan(_args(tmp_path, PRESET + "cost_limits: [2, 5]\ntuned_limit: 2\n"))
+    plan, = cli.make_plan(_args(tmp_path, PRESET + "cost_limits: [2, 5]\ntuned_limit: 2\n"))
     assert [t.params["cost_limit"] for t in plan.trials] == [2.0, 5.0]
     assert all(t.params["lr"] == 0.002 and t.params["clip_param"] == 0.25 for t in plan.trials)
     with pytest.raises(ValueError) as e:  # without preset: tuned it would say nothing: refused
@@ -170,14 +170,14 @@ def test_old_format_entries_still_read_and_list_their_missing_fields_as_unknown(
     assert "lac/PointHazard-v0 lac @ quick (limit 2): langevin_steps=61" in shipped and "verdict unknown" in shipped
     # An entry in the earlier layout (tuned/<task>/<algo>.yaml) without the new fields still runs.
     _entry(tmp_path / "registry", legacy=True)
-    plan = cli.make_plan(_args(tmp_path, PRESET))
+    plan, = cli.make_plan(_args(tmp_path, PRESET))
     assert plan.trials[0].params["lr"] == 0.002 and plan.trials[0].params["clip_param"] == 0.25
     text = listing(tmp_path / "registry")
     assert "verdict unknown" in text and "searcher, samples, random start, search space, per-seed scores" in text
 
 
 def test_the_shipped_trpo_lag_entry_tuned_worse_runs_the_default(tmp_path, capsys):
-    plan = cli.make_plan(_args(tmp_path, "algo: trpo_lag\nbudget: quick\nseeds: 1\npreset: tuned\n", registry=False))
+    plan, = cli.make_plan(_args(tmp_path, "algo: trpo_lag\nbudget: quick\nseeds: 1\npreset: tuned\n", registry=False))
     default = spaces.trial_params(TASK, "quick", {"algo": "trpo_lag"})
     assert plan.trials[0].params == default
     out = capsys.readouterr().out

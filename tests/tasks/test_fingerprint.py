@@ -84,13 +84,13 @@ def test_a_resume_under_a_changed_environment_is_refused(tmp_path, monkeypatch):
 
     argv = ["--space", "smoke", "--budget", "smoke", "--seeds", "1", "--experiment", "test",
             "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")]
-    plan = cli.make_plan(cli.parse_args(argv))
+    plan, = cli.make_plan(cli.parse_args(argv))
     write_record(Path(plan.storage) / plan.name, plan, "parent-run")
-    assert checked_sweep_dir(cli.make_plan(cli.parse_args([*argv, "--resume"])))  # the same environment resumes
+    assert checked_sweep_dir(cli.make_plan(cli.parse_args([*argv, "--resume"]))[0])  # the same environment resumes
     real = fpm.runtime_versions
     monkeypatch.setattr(fpm, "runtime_versions", lambda: {**real(), "mujoco": "9.9.9"})
     with pytest.raises(ValueError) as e:
-        checked_sweep_dir(cli.make_plan(cli.parse_args([*argv, "--resume"])))
+        checked_sweep_dir(cli.make_plan(cli.parse_args([*argv, "--resume"]))[0])
     assert "was started with other settings" in str(e.value) and "mujoco" in str(e.value) and "vs 9.9.9" in str(e.value)
 
 
@@ -103,8 +103,8 @@ def test_two_smoke_runs_differing_in_envs_per_runner_are_split_in_the_summary(ra
     path = tmp_path / "envs.yaml"
     path.write_text("budget: smoke\nseeds: 1\neval_episodes: 0\nalgo: ppo_lag\n"
                     "grid: {num_envs_per_env_runner: [1, 2]}\n")
-    plan = cli.make_plan(cli.parse_args(["--config", str(path), "--experiment", "test", "--tracking-uri",
-                                         f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")]))
+    plan, = cli.make_plan(cli.parse_args(["--config", str(path), "--experiment", "test", "--tracking-uri",
+                                          f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "rr")]))
     assert run_sweep(plan, Path(plan.storage) / plan.name, "test-commit") == 0
     client = MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")
     runs = client.search_runs([client.get_experiment_by_name("test").experiment_id])

@@ -313,7 +313,8 @@ PRESETS = {"ppo_lag": "ssa", "trpo_lag": "ssa", "cpo": "ssa", "focops": "paper"}
 
 def _plan(tmp_path, monkeypatch, *argv):
     monkeypatch.chdir(tmp_path)
-    return cli.make_plan(cli.parse_args(["--storage", str(tmp_path / "rr"), *argv]))
+    plan, = cli.make_plan(cli.parse_args(["--storage", str(tmp_path / "rr"), *argv]))
+    return plan
 
 
 def _check_plan(plan, tasks, algos, seeds):
