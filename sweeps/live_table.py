@@ -2,7 +2,7 @@
 
 A Tune ``ProgressReporter`` (Tune calls ``should_report``/``report``). Tune's default output
 names a trial by its config, which for a grid of nested dicts prints as ``...iteration': None}``;
-here a trial is its label (group, swept value, seed: ``TrialSpec.label``), and the table holds
+here a trial is its label (algorithm, group, swept value, seed: ``TrialSpec.label``), and the table holds
 what a safe-RL user watches: status, iteration, env steps, return, cost, feasible, ν. The last
 line counts trials done / total and estimates the time left from the finished trials.
 """

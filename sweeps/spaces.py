@@ -18,6 +18,11 @@ from lac_rllib.algorithms.registry import DEFAULT_ALGO  # no RLlib import: the r
 #: The field a ladder sets per trial, and the frontier's group and field (sweeps/reports/ladder.py).
 COST_LIMIT_FIELD, FRONTIER_GROUP, FRONTIER_FIELD = "cost_limit", "frontier", "nu_fixed"
 REPEAT_INDEX = "__trial_index__"  # ray.tune.search.repeater.TRIAL_INDEX (not imported: no Ray before the plan)
+#: How a trial is labelled, carried in its Tune config (sweeps/sweep.py ``param_space``): its
+#: algorithm first and once. A config without it was planned when LAC's trials named no algorithm
+#: and others' named theirs, sometimes twice: a sweep recorded then and resumed keeps those labels
+#: (:func:`legacy_config_label`), one per configuration across its trials before and after.
+LABELS_KEY, LABELS = "labels", "algorithm-first"
 DEFAULT_TASK = "lac/PointHazard-v0"  # a sweep file that names no task: a task that learns in minutes
 QUICK_TINY_STEPS = 40_000
 
@@ -91,6 +96,8 @@ class TrialSpec:
     #: The cost limit of the ladder this trial runs at (``cost_limits``; its ``cost_limit``); None:
     #: no ladder, the task's limit.
     limit: float | None = None
+    #: Labelled as a sweep recorded before ``LABELS`` labelled it (its Tune config lacks ``LABELS_KEY``).
+    legacy_label: bool = False
 
     @property
     def algo(self) -> str:
@@ -100,16 +107,47 @@ class TrialSpec:
         return (self.params or self.overrides).get(ALGO_FIELD, DEFAULT_ALGO)
 
     def config_label(self) -> str:
-        """The configuration without its seed (MLflow's ``lac.config`` tag); it names a baseline."""
+        """The configuration without its seed (MLflow's ``lac.config`` tag), e.g.
+        ``ppo_lag-ladder-PointHazard-v0-b2``: its algorithm, first and once for every algorithm, then
+        its group without the algorithm's name, its grid point without ``algo`` (or its sampled
+        values), its task and its rung of a ladder. A label names; no trial's learning reads it."""
+        if self.legacy_label:
+            return legacy_config_label(self)
+        from lac_rllib.algorithms.registry import ALGO_FIELD
+
+        algo = self.algo
         if self.sampled is not None:
-            return search_label(self.sampled, None)
-        task = self.task.split("/")[-1]
-        label = f"{self.group}-{self.param}={self.value}-{task}" if self.param else f"{self.group}-{task}"
-        label += "" if self.limit is None else f"-b{_short(self.limit)}"  # a ladder's rung: its own configuration
-        return label if self.algo == DEFAULT_ALGO or self.param == "algo" else f"{self.algo}-{label}"
+            return f"{algo}-{search_label({k: v for k, v in self.sampled.items() if k != ALGO_FIELD}, None)}"
+        group = "-".join(part for part in self.group.split("-") if part != algo)  # ALGO-tuned1, baseline-ALGO
+        label = "-".join(p for p in (algo, group, _grid_point(self.param, self.value), self.task.split("/")[-1]) if p)
+        return label if self.limit is None else f"{label}-b{_short(self.limit)}"  # a ladder's rung: its own
 
     def label(self) -> str:
         return f"{self.config_label()}-s{self.seed}"
+
+
+def legacy_config_label(t: TrialSpec) -> str:
+    """A trial's label as sweeps recorded before ``LABELS`` wrote it: LAC's without its algorithm,
+    another algorithm's with it first, a grid over ``algo`` with it as the swept value, a search's
+    by its sampled values alone."""
+    if t.sampled is not None:
+        return search_label(t.sampled, None)
+    task = t.task.split("/")[-1]
+    label = f"{t.group}-{t.param}={t.value}-{task}" if t.param else f"{t.group}-{task}"
+    label += "" if t.limit is None else f"-b{_short(t.limit)}"
+    return label if t.algo == DEFAULT_ALGO or t.param == "algo" else f"{t.algo}-{label}"
+
+
+def _grid_point(param: str, value) -> str:
+    """A grid point in a label, ``param=value``, without ``algo`` (the label names it first)."""
+    from lac_rllib.algorithms.registry import ALGO_FIELD
+
+    fields = param.split(",") if param else []
+    if ALGO_FIELD not in fields:
+        return f"{param}={value}" if param else ""
+    values = str(value).split(",") if len(fields) > 1 else [value]
+    kept = [(f, v) for f, v in zip(fields, values) if f != ALGO_FIELD]
+    return f"{','.join(f for f, _ in kept)}={','.join(str(v) for _, v in kept)}" if kept else ""
 
 
 def config_id(task: str, timesteps: int, params: dict) -> str:
@@ -151,16 +189,19 @@ def trial_spec(config: dict) -> TrialSpec:
     """A Tune trial's config as the TrialSpec it runs: a grid trial carries its own, resolved at
     plan time (``trial``); a search trial is made from what Optuna sampled (``overrides``), resolved
     here through the same :func:`trial_params` (with the sweep's ``budget`` and ``sets``), its seed
-    the sweep's seed at its index among its sample's repeats (Tune's Repeater numbers them 0..N-1)."""
+    the sweep's seed at its index among its sample's repeats (Tune's Repeater numbers them 0..N-1);
+    labelled the legacy way where the config lacks ``LABELS_KEY`` (a sweep planned before it)."""
+    legacy = config.get(LABELS_KEY) != LABELS
     if "trial" in config:
-        return TrialSpec(**config["trial"])
+        return dataclasses.replace(TrialSpec(**config["trial"]), legacy_label=legacy)
     task, budget, sets = config["task"], config["budget"], config.get("sets", {})
     sampled = dict(config["overrides"])
     params = trial_params(task, budget, sets, sampled)
     index = int(config.get(REPEAT_INDEX, 0))
     seed = config["seeds"][index] if "seeds" in config else index
     return TrialSpec("search", "", None, task, seed, sampled, sampled=sampled, params=params,
-                     default=params == trial_params(task, budget, sets), timesteps=get_budget(budget).for_task(task))
+                     default=params == trial_params(task, budget, sets), timesteps=get_budget(budget).for_task(task),
+                     legacy_label=legacy)
 
 
 def groups_for(sweep, preset: str) -> dict:

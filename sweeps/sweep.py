@@ -114,7 +114,7 @@ def param_space(plan: Plan, parent_run_id: str) -> dict:
         "eval_episodes": EVAL_EPISODES if plan.sweep.eval_episodes is None else plan.sweep.eval_episodes,
         "score": plan.sweep.score or SCORES[0],
         "eval_modes": plan.sweep.eval_modes, "eval_every": plan.sweep.eval_every,
-        "user_algos": plan.user_algos,
+        "user_algos": plan.user_algos, spaces.LABELS_KEY: spaces.LABELS,  # how its trials are labelled
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
     if plan.trials is None:  # search: Optuna samples the fields; the trial resolves them (spaces.trial_spec)

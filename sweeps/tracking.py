@@ -39,7 +39,7 @@ P_TASK_SOURCE = "task_source"  # what builds the task's env: a factory ("module:
 P_ALGO, ALGO_TAG = "algo", "lac.algo"  # which algorithm the run trained (a registry name)
 P_SWEPT_PARAM, P_SWEPT_VALUE = "swept_param", "swept_value"  # the grid point: which field, which value
 CONFIG_ID_TAG = "lac.config_id"  # a child run's configuration without its seed (spaces.config_id)
-CONFIG_TAG = "lac.config"  # the same, readable (group-param=value-task, or the search sample)
+CONFIG_TAG = "lac.config"  # the same, readable (algo-group-param=value-task, or algo-search-sample)
 #: A trial's env fingerprint (lac_rllib/tasks/fingerprint.py): its id, and the whole as JSON.
 ENV_FINGERPRINT_TAG, ENV_FINGERPRINT_JSON_TAG = "lac.env_fingerprint", "lac.env_fingerprint_json"
 DEFAULT_TAG = "lac.default_config"  # "1" on runs of LAC's defaults: the report's baseline

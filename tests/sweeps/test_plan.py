@@ -24,13 +24,13 @@ def test_the_default_ablation_is_what_the_readme_says(tmp_path, monkeypatch):
     plan = _plan(tmp_path, monkeypatch, "--space", "ablation")
     assert (plan.task, plan.budget, plan.timesteps, plan.n_trials) == ("lac/PointHazard-v0", "quick", 40_000, 24)
     labels = {t.config_label() for t in plan.trials}
-    assert labels == {f"NI-langevin_steps={t}-PointHazard-v0" for t in (20, 30)} | {
-        f"VT-langevin_steps={t}-PointHazard-v0" for t in (10, 20, 30)} | {
-        f"PR-beta={b}-PointHazard-v0" for b in (0.5, 1.0)} | {"unconstrained-PointHazard-v0"}
+    assert labels == {f"lac-NI-langevin_steps={t}-PointHazard-v0" for t in (20, 30)} | {
+        f"lac-VT-langevin_steps={t}-PointHazard-v0" for t in (10, 20, 30)} | {
+        f"lac-PR-beta={b}-PointHazard-v0" for b in (0.5, 1.0)} | {"lac-unconstrained-PointHazard-v0"}
     unconstrained = [t for t in plan.trials if t.group == "unconstrained"]
     assert [(t.params["nu_lr"], t.params["nu_init"]) for t in unconstrained] == [(0.0, 0.0)] * 3
     defaults = [t.label() for t in plan.trials if t.default]
-    assert defaults == [f"VT-langevin_steps=20-PointHazard-v0-s{s}" for s in range(3)]
+    assert defaults == [f"lac-VT-langevin_steps=20-PointHazard-v0-s{s}" for s in range(3)]
     # The first screen gives the measured range; the paragraph below it every measurement and the
     # plan's uncalibrated estimate (the tests run uncalibrated: conftest.py), which must be the plan's.
     lo, hi = map(float, re.search(r"\d+ trials, (\d+)-(\d+) min on 2 cores as measured", FIRST_SCREEN).groups())
@@ -98,9 +98,9 @@ def test_trial_fields_are_resolved_once_in_order(tmp_path, monkeypatch):
     assert PRESETS["tiny"]["langevin_steps"] == 10  # the preset ...
     budget = budget_fields(DEFAULT_ALGO, "quick", "tiny")  # what LAC declares for the quick budget on tiny tasks
     assert budget["langevin_steps"] == 20 and budget["num_envs_per_env_runner"] == 10  # ... < the budget ...
-    vt10 = by_label["VT-langevin_steps=10-PointHazard-v0-s0"]
+    vt10 = by_label["lac-VT-langevin_steps=10-PointHazard-v0-s0"]
     assert (vt10["langevin_steps"], vt10["beta"], vt10["num_envs_per_env_runner"]) == (10, 2.0, 10)  # < swept
-    pr = by_label["PR-beta=0.5-PointHazard-v0-s0"]
+    pr = by_label["lac-PR-beta=0.5-PointHazard-v0-s0"]
     assert (pr["langevin_steps"], pr["beta"]) == (15, 0.5)  # --set < swept, budget < --set
     assert pr["replay_capacity"] == PRESETS["tiny"]["replay_capacity"]  # the preset where nothing else sets it
     # No trial runs the defaults any more (T = 15 is not swept), so none is flagged as the baseline.
@@ -123,7 +123,7 @@ def test_the_compare_space_runs_every_algorithm_at_one_budget(tmp_path, monkeypa
     assert [t.algo for t in plan.trials] == [a for a in ALGOS for _ in range(3)] and plan.trials[0].algo == "lac"
     assert [t.params["algo"] for t in plan.trials] == [t.algo for t in plan.trials]
     assert [t.default for t in plan.trials] == [True] * 3 + [False] * (3 * n - 3)  # LAC's defaults: the reference
-    assert {t.config_label() for t in plan.trials} == {f"compare-algo={a}-PointHazard-v0" for a in ALGOS}
+    assert {t.config_label() for t in plan.trials} == {f"{a}-compare-PointHazard-v0" for a in ALGOS}
     assert "langevin_steps" not in plan.trials[3].params and "langevin_steps" in plan.trials[0].params
     assert plan.estimated_wall_s / 60 <= 35
 

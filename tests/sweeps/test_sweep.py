@@ -139,7 +139,7 @@ def test_search_scores_each_configuration_over_its_seeds(ray_session, tmp_path):
         assert sorted(json.loads(r.data.params["seed"]) for r in runs) == [0, 1]
         assert len({r.data.params["temperature"] for r in runs}) == 1  # the same sample
         labels = {r.data.tags["lac.config"] for r in runs}
-        assert len(labels) == 1 and labels.pop().startswith("search-T=")
+        assert len(labels) == 1 and labels.pop().startswith("lac-search-T=")
     # Optuna was told once per configuration: the objective and the constraint of the seed means.
     searcher = ConstrainedOptunaSearch()
     searcher.restore_from_dir(str(tmp_path / "ray_results" / "search-PointHazard-v0-smoke"))
@@ -498,7 +498,7 @@ def test_a_smoke_compare_sweep_runs_every_algorithm_and_evaluate_restores_each(r
     assert sorted(by_algo) == sorted(ALGOS)  # compare.yaml: every algorithm of the package
     for algo, c in by_algo.items():
         assert c.info.status == "FINISHED" and c.data.tags["lac.algo"] == algo
-        assert c.data.tags["lac.config"] == f"compare-algo={algo}-PointHazard-v0"
+        assert c.data.tags["lac.config"] == f"{algo}-compare-PointHazard-v0"
         steps = [m.step for m in client.get_metric_history(c.info.run_id, "episode_cost")]
         assert steps and steps[-1] >= 2000, (algo, steps)
         assert len(client.get_metric_history(c.info.run_id, "nu")) == len(steps)

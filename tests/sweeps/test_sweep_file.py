@@ -185,8 +185,9 @@ def test_a_search_samples_with_the_searcher_the_file_names(tmp_path, monkeypatch
     space = spaces.tune_search_space(plan.sweep.search)
     assert space["langevin_steps"].categories == [5, 10] and space["beta"].sampler.q == 0.5
     spec = spaces.trial_spec({"task": plan.task, "budget": plan.budget, "sets": plan.sets, "seeds": [5, 9],
-                              "overrides": {"nu_lr": 0.01, "langevin_steps": 5, "beta": 1.0}, "__trial_index__": 1})
-    assert spec.seed == 9 and spec.params["nu_lr"] == 0.01 and spec.label() == "search-nu_lr=0.01-T=5-beta=1-s9"
+                              "overrides": {"nu_lr": 0.01, "langevin_steps": 5, "beta": 1.0}, "__trial_index__": 1,
+                              spaces.LABELS_KEY: spaces.LABELS})
+    assert spec.seed == 9 and spec.params["nu_lr"] == 0.01 and spec.label() == "lac-search-nu_lr=0.01-T=5-beta=1-s9"
 
 
 # ---------------------------------------------------------------- a user's own env (tests/sweeps/user_envs.py)
