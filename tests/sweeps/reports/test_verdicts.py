@@ -138,7 +138,7 @@ def test_the_regret_interval_covers_the_regret_to_the_chosen_point(dist):
 
 def _documented(method: str, dist: str) -> list[float]:
     """docs/sweeps.md's coverage row of ``method`` on ``dist`` (its "Intervals" table)."""
-    row = next(line for line in DOCS.read_text().splitlines() if line.startswith(f"| {method} | {dist} |"))
+    row = next(line for line in DOCS.read_text().splitlines() if line.strip().startswith(f"| {method} | {dist} |"))
     return [float(x) / 100 for x in re.findall(r"(\d+(?:\.\d+)?)%", row)]
 
 
