@@ -1,12 +1,13 @@
 """The reward-cost frontier of a sweep: which configurations are worth having.
 
 A configuration (a row of ``sweeps.reports.report.summarize``) is *feasible* by the one rule of
-sweeps/reports/verdicts.py (its ``feasible`` column: ≥ 80% of its seeds within the limit) and *on the frontier* when it is feasible and no other
-feasible configuration of the same task has a return at least as high and a cost at least as low,
-with one of the two strictly better. Two configurations with the same return and cost do not
-dominate each other: both stay on the frontier. A configuration without finished seeds (NaN
-return or cost) or without a limit is never on it. Why feasible only: a constrained problem ranks
-an over-limit policy below every within-limit one, however high its return.
+sweeps/reports/verdicts.py (its ``feasible`` column: ≥ 80% of its seeds within the limit) and *on
+the frontier* when it is feasible and no other feasible configuration of the same task has a return
+at least as high and a cost at least as low, with one of the two strictly better. Two configurations
+with the same return and cost do not dominate each other: both stay on the frontier. A configuration
+without finished seeds (NaN return or cost) or without a limit is never on it. Why feasible only: a
+constrained problem ranks an over-limit policy below every within-limit one, however high its
+return.
 
 The plot shows every configuration on (cost, return) axes with its 95% intervals in
 both directions (sweeps/reports/verdicts.py), one panel per task: the cost limit dashed, the frontier starred

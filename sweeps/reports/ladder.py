@@ -228,11 +228,12 @@ def ladder_markdown(table: pd.DataFrame) -> str:
     out = ["## Across the ladder of cost limits", "", *methods_lines(), ""]
     for task, t in table.groupby("task", sort=False):
         algo = next((a for a in t["r_star_algo"] if a), "")
-        whose = (f"R*(b): {algo}'s fixed-ν frontier (its ν chosen on half its seeds, R* measured on the rest); "
-                 "for the other algorithms' rows it is that algorithm's frontier, not their own.") if algo else \
-            "No frontier ran: no R*(b), no regret."
+        whose = "No frontier ran: no R*(b), no regret."
+        if algo:
+            whose = (f"R*(b): {algo}'s fixed-ν frontier (its ν chosen on half its seeds, R* measured on the rest); "
+                     "for the other algorithms' rows it is that algorithm's frontier, not their own.")
         out += [f"### {task}", "", whose, "", "| b | rank | configuration | seeds | return [95%] | cost | feasible "
-                "seeds | P(feasible) [Wilson] | R*(b) (ν, seeds) | regret [95%] |", "|---|---|---|---|---|---|---|---|---|---|"]
+                "seeds | P(feasible) [Wilson] | R*(b) (ν, seeds) | regret [95%] |", "|---" * 10 + "|"]
         for _, r in t.iterrows():
             ranks = t.loc[t[COST_LIMIT] == r[COST_LIMIT], "rank"]
             star = (f"– ({r['r_star_why']})" if is_na(r["r_star"]) else

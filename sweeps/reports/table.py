@@ -254,8 +254,9 @@ def _value(s: Shown, which: str) -> float:
 def legend_line(intervals: bool = True) -> str:
     what = (f"Mean ± std over seeds [{CONFIDENCE:.0%} interval of the mean: {METHODS['mean']}]" if intervals else
             f"Mean ± std over seeds (the {CONFIDENCE:.0%} intervals: summary/table.md)")
-    return (f"{what}; **bold**: feasible (≥ 80% of the seeds within the limit); {BEST_MARK}: the task's best feasible return "
-            "(ties kept). Below each task: the same algorithm as published, return / cost (blank: none published).")
+    return (f"{what}; **bold**: feasible (≥ 80% of the seeds within the limit); {BEST_MARK}: the task's best "
+            "feasible return (ties kept). Below each task: the same algorithm as published, return / cost "
+            "(blank: none published).")
 
 
 def _sources(table: Table, beside: Beside) -> tuple[list[Source], list[str]]:

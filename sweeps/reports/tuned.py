@@ -182,7 +182,8 @@ def markdown(tp, comp: dict) -> str:
             lines.append(f"| {algo} | {_ci(d['return'])} | {_ci(d['cost'])} | {_seeds_cell(d)} | "
                          f"{d['n_feasible']}/{d['n_seeds']} | {_ci(tu['return'])} | {_ci(tu['cost'])} | "
                          f"{_seeds_cell(tu)} | {tu['n_feasible']}/{tu['n_seeds']} | {gap} | "
-                         f"{fmt_num(v['p_improvement'])} | {'yes' if v['improved'] else 'no'} | {fmt_num(v['curse'])} |")
+                         f"{fmt_num(v['p_improvement'])} | {'yes' if v['improved'] else 'no'} | "
+                         f"{fmt_num(v['curse'])} |")
         changed = "tuning changed it" if r["changed"] else "tuning did not change it"
         lines += ["", f"**Ranking on the fresh seeds** (feasible first, then by return; `=`: intervals overlap): "
                       f"tuned {r['tuned']}; defaults {r['default']}: {changed}.", ""]

@@ -176,7 +176,8 @@ def test_the_comparison_ranks_tuned_and_default_and_says_whether_tuning_changed_
 
 def test_ties_failed_seeds_unequal_budgets_and_two_environments_are_reported():
     # A and B tuned overlap (ties); C ran in another environment (the fingerprint split its task): ranked apart.
-    trials = _confirmation([("A-tuned1", 1.0, 0.0, 3), ("A-tuned1", 1.2, 0.0, 4), ("A-tuned1", 0.0, 0.0, 5, "T", "ERROR"),
+    trials = _confirmation([("A-tuned1", 1.0, 0.0, 3), ("A-tuned1", 1.2, 0.0, 4),
+                            ("A-tuned1", 0.0, 0.0, 5, "T", "ERROR"),
                             ("A-default", 0.9, 0.0, 3), ("A-default", 1.0, 0.0, 4), ("A-default", 1.0, 0.0, 5),
                             ("B-tuned1", 1.1, 0.0, 3), ("B-tuned1", 1.3, 0.0, 4),
                             ("B-default", 0.5, 0.0, 3), ("B-default", 0.6, 0.0, 4),

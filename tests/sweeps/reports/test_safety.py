@@ -86,7 +86,8 @@ def test_safety_table_per_configuration():
     assert list(t.columns) == safety.KEYS + safety.SAFETY_COLUMNS and list(t["value"]) == [10, 20]
     a = t.iloc[0]
     assert (a["n_seeds"], a["n_feasible"]) == (3, 2)
-    assert (a["p_feasible"], a["p_feasible_low"], a["p_feasible_high"]) == pytest.approx(verdicts.proportion_interval(2, 3))
+    wilson = verdicts.proportion_interval(2, 3)
+    assert (a["p_feasible"], a["p_feasible_low"], a["p_feasible_high"]) == pytest.approx(wilson)
     assert a["violation_total"] == pytest.approx((15 + 13 + 6) / 3)
     assert a["violation_mean"] == pytest.approx((15 / 2 + 13 / 3 + 6 / 2) / 3)
     assert (a["worst_excess"], a["worst_env_steps"], a["worst_trial_id"]) == (15.0, 1000.0, "a0")

@@ -41,7 +41,8 @@ DRAWS = {"normal": normal, "lognormal": lognormal, "bimodal": bimodal}
 
 
 def coverage(interval, draw, n, seed=0) -> float:
-    """The share of ``N_DATASETS`` datasets whose interval (``interval(rng, n) -> (low, high, truth)``) holds the truth."""
+    """The share of ``N_DATASETS`` datasets whose interval holds the truth (``interval(rng, n, draw)``:
+    (low, high, truth))."""
     rng = np.random.default_rng(seed)
     hits = 0
     for _ in range(N_DATASETS):
