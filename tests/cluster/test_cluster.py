@@ -248,7 +248,7 @@ def assert_opens_on_the_results(rest, name, uri, out):
     for what in ("5", "10 (default)"):  # one row per swept value, with its seed count
         assert f"| smoke | langevin_steps={what} | 2 |" in note, note
     labels = sorted(t["tags"]["mlflow.runName"] for t in rest.trials(name))
-    assert labels == [f"smoke-langevin_steps={v}-PointHazard-v0-s{s}" for v in (10, 5) for s in (0, 1)], labels
+    assert labels == [f"lac-smoke-langevin_steps={v}-PointHazard-v0-s{s}" for v in (10, 5) for s in (0, 1)], labels
 
 
 def test_sweep_on_two_nodes_with_a_tracking_server(cluster, rest, start_sweep):

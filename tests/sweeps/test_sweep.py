@@ -64,11 +64,11 @@ def test_smoke_sweep_end_to_end(ray_session, tmp_path, capsys):
     assert note.startswith("**Sweep `smoke-PointHazard-v0-smoke`**: 4 of 4 trials finished"), note
     assert "| smoke | langevin_steps=5 | 2 |" in note and "| smoke | langevin_steps=10 (default) | 2 |" in note, note
     assert sorted(c.data.tags["mlflow.runName"] for c in children) == [
-        f"smoke-langevin_steps={v}-PointHazard-v0-s{s}" for v in (10, 5) for s in (0, 1)]
+        f"lac-smoke-langevin_steps={v}-PointHazard-v0-s{s}" for v in (10, 5) for s in (0, 1)]
     # The live table: what each trial is, its figures, and a progress line.
     headers = ("status", "iter", "env steps", "return", "cost", "feasible", "ν")
     assert "trial  " in out and all(h in out for h in headers)
-    assert re.search(r"smoke-langevin_steps=5-PointHazard-v0-s1 +TERMINATED +4 +2,000 ", out), out[-3000:]
+    assert re.search(r"lac-smoke-langevin_steps=5-PointHazard-v0-s1 +TERMINATED +4 +2,000 ", out), out[-3000:]
     assert "progress: 4/4 trials done · 0 running · ETA ~0 min (mean" in out, out[-3000:]
     assert "...iteration" not in out
     assert {"ray", "torch", "mujoco", "numpy", "git_commit", "space", "seeds"} <= set(parent.data.params)
