@@ -271,14 +271,19 @@ def best_within(points: pd.DataFrame, limit: float) -> dict:
     choose_on, measure_on = split_seeds(points["seed"])
     if not choose_on:
         return none | {"why": f"the frontier has {len(measure_on)} seed(s) per ν; it needs ≥ {MIN_FRONTIER_SEEDS}"}
+    # numpy, not a groupby: the coverage simulation calls this tens of thousands of times.
+    nus, seed = points["nu"].to_numpy(), points["seed"].to_numpy()
+    ret, cost = points["return"].to_numpy(dtype=float), points["cost"].to_numpy(dtype=float)
+    choosing, measuring = np.isin(seed, choose_on), np.isin(seed, measure_on)
     best, best_mean = None, -math.inf
-    for nu, g in points.groupby("nu", sort=False):
-        chosen = g[g["seed"].isin(choose_on)]
-        if len(chosen) and configuration_feasible(chosen["cost"], limit) and chosen["return"].mean() > best_mean:
-            best, best_mean = nu, float(chosen["return"].mean())
+    for nu in pd.unique(nus):
+        m = choosing & (nus == nu)
+        r = ret[m][np.isfinite(ret[m])]
+        if m.any() and r.size and configuration_feasible(cost[m], limit) and r.mean() > best_mean:
+            best, best_mean = nu, float(r.mean())
     if best is None:
         return none | {"why": f"no fixed ν is feasible within b = {limit:g} on the frontier's choosing seeds"}
-    held = points[(points["nu"] == best) & points["seed"].isin(measure_on)]["return"].to_numpy(dtype=float)
+    held = ret[measuring & (nus == best)]
     return {"r_star": float(np.mean(held)) if held.size else math.nan, "r_star_nu": best, "r_star_scores": held,
             "why": "" if held.size else "the chosen ν has no held-out seed"}
 
