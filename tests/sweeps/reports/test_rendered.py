@@ -56,3 +56,11 @@ def test_the_readmes_default_ablation_figures_are_the_verdicts_of_its_trials():
     best = stats[("NI", 30.0)]
     ties = sorted(f"{g} {v:g}" for (g, v), (_, lo, hi) in stats.items() if hi >= best[1] and (g, v) != ("NI", 30.0))
     assert ties == ["NI 20", "PR 0.5", "VT 20", "VT 30"], ties  # the README names these as tied
+
+
+def test_the_committed_partial_ladder_is_rendered_from_its_trials(tmp_path):
+    folder = DOCS / "ladder-pointhazard" / "rerun-in-progress"
+    rendered.render_ladder(folder, tmp_path)
+    assert (tmp_path / "ladder.md").read_text() == (folder / "ladder.md").read_text()
+    for name in ("ladder.csv", "frontier_points.csv"):
+        _same_csv(tmp_path / name, folder / name)
