@@ -18,6 +18,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import pandas as pd
+
 from sweeps import followup, spaces
 from sweeps.plan import Plan, plan_sweep
 from sweeps.record import SWEEP_FILE
@@ -207,6 +209,31 @@ def pick_winners(summary, fields_of: dict, k: int) -> list[dict]:
             for r in rows.to_dict("records")]
 
 
+def search_winners(tp: TunedPlan, algo: str, trials) -> list[dict]:
+    """``algo``'s winners (:func:`pick_winners`) from its search's ``trials`` (each with the values of
+    the fields it searched)."""
+    from sweeps.reports.report import summarize
+
+    if not len(trials):
+        return []
+    fields = tp.searches[algo].sweep.search or ()
+    return pick_winners(summarize(trials), followup.fields_of(trials, fields), tp.sweep.tune.top)
+
+
+def tuned_report(tp: TunedPlan, searched: dict, confirmation) -> tuple[dict, dict, str]:
+    """(winners, comparison, Markdown) of a tuned comparison from its data alone: ``searched``, algo →
+    its search's trials; ``confirmation``, the confirmation's trials. The run writes its report with
+    this, and sweeps/reports/rendered.py renders a committed folder with it again."""
+    from sweeps.reports import tuned as report
+    from sweeps.reports.report import summarize
+
+    winners = {algo: search_winners(tp, algo, trials) for algo, trials in searched.items()}
+    runs = {algo: (trials, summarize(trials) if len(trials) else pd.DataFrame(), tp.searches[algo].timesteps)
+            for algo, trials in searched.items()}
+    comparison = report.comparison(runs, winners, confirmation)
+    return winners, comparison, report.markdown(tp, comparison)
+
+
 def _plain(v):
     return v.item() if hasattr(v, "item") else v
 
@@ -228,10 +255,8 @@ def run_tuned(tp: TunedPlan, run_plan) -> int:
             rc = run_plan(plan, checked_sweep_dir(plan))
             if rc != 0:
                 return rc
-        searched_fields = plan.sweep.search or ()
-        trials, summary = followup.read_back(plan, searched_fields)
-        winners[algo] = pick_winners(summary, followup.fields_of(trials, searched_fields), tp.sweep.tune.top)
-        searched[algo] = (trials, summary, plan.timesteps)
+        searched[algo], _ = followup.read_back(plan, plan.sweep.search or ())
+        winners[algo] = search_winners(tp, algo, searched[algo])
         if not winners[algo]:
             print(f"tune: {algo}'s search finished no configuration; nothing to confirm", flush=True)
             return 1
@@ -243,18 +268,19 @@ def run_tuned(tp: TunedPlan, run_plan) -> int:
         rc = run_plan(confirmation, checked_sweep_dir(confirmation))
         if rc != 0:
             return rc
-    from sweeps.reports import tuned as report
+    from sweeps.record import parent_run_id
+    from sweeps.reports.rendered import write_tuned_data
     from sweeps.tuned_registry import write_entries
 
     trials, _ = followup.read_back(confirmation)
-    comparison = report.comparison(searched, winners, trials)
-    text = report.markdown(tp, comparison)
+    winners, comparison, text = tuned_report(tp, searched, trials)
     tracker = SweepTracker(confirmation.tracking_uri, confirmation.experiment)
-    from sweeps.record import parent_run_id
-
     parent = parent_run_id(Path(confirmation.storage) / confirmation.name)
     tracker.client.log_text(parent, text, "tuned/report.md")
-    (Path(confirmation.storage) / confirmation.name / "tuned.md").write_text(text)
+    here = Path(confirmation.storage) / confirmation.name
+    (here / "tuned.md").write_text(text)
+    # The data the report is rendered from, beside it (python -m sweeps.reports.rendered renders it again).
+    write_tuned_data(here / "tuned-data", tp.sweep, searched, trials)
     written = write_entries(tp, comparison, winners, parent, {a: p for a, p in tp.searches.items()}, trials)
     print(text)
     print("registry: " + ", ".join(str(p) for p in written), flush=True)

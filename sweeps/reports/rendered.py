@@ -1,16 +1,24 @@
 """Reports in docs/ rendered by the project's code from the data committed beside them.
 
-An evidence folder (docs/ladder-pointhazard/, ...) commits the trials its sweep recorded
-(``trials.csv``: one row per trial, as the sweep's parent run wrote it in ``summary/trials.csv``) and
-the reports rendered from that file alone: ``ladder.md``, ``ladder.csv``, ``frontier_points.csv`` and
-``ladder.png`` for a ladder. ``python -m sweeps.reports.rendered DIR`` renders them again;
-tests/sweeps/reports/test_rendered.py does so for every such folder and compares the figures, so a
-report in docs/ always says what its data says under the code as it is.
+An evidence folder commits the trials its sweeps recorded and the reports rendered from them alone:
+
+- a ladder (docs/ladder-pointhazard/): ``trials.csv`` (one row per trial, as the sweep's parent run
+  wrote it in ``summary/trials.csv``) → ``ladder.md``, ``ladder.csv``, ``frontier_points.csv``,
+  ``ladder.png``;
+- a tuned comparison (docs/tuned-pointhazard/): ``sweep.yaml`` (the resolved sweep file with its
+  ``tune:``), ``search-ALGO.csv`` (each search's trials with the values it searched) and
+  ``confirmation.csv`` (the confirmation's trials), as the run writes them (``tuned-data/`` in the
+  confirmation's directory) → ``report.md``, the report the run printed.
+
+``python -m sweeps.reports.rendered DIR`` renders a folder again; tests/sweeps/reports/test_rendered.py
+does so for every such folder and compares the figures, so a report in docs/ always says what its
+data says under the code as it is.
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 
 import pandas as pd
@@ -19,13 +27,17 @@ import pandas as pd
 TRIALS = "trials.csv"
 #: What a ladder folder's rendering writes (ladder.png beside them).
 LADDER_FILES = ("ladder.md", "ladder.csv", "frontier_points.csv")
+#: A tuned comparison's data: its sweep file, each search's trials, the confirmation's trials.
+SWEEP, SEARCH, CONFIRMATION = "sweep.yaml", "search-{algo}.csv", "confirmation.csv"
+#: What a tuned folder's rendering writes.
+TUNED_REPORT = "report.md"
 
 
-def read_trials(folder: Path) -> pd.DataFrame:
-    """A folder's ``trials.csv``, its text columns read as text (a swept value "0.25" stays the
+def read_trials(folder: Path, name: str = TRIALS) -> pd.DataFrame:
+    """A folder's trials (``trials.csv``), text columns read as text (a swept value "0.25" stays the
     value the sweep logged, a missing one empty)."""
-    return pd.read_csv(Path(folder) / TRIALS, dtype={"param": str, "group": str, "config": str, "task": str,
-                                                       "algo": str}, keep_default_na=True)
+    return pd.read_csv(Path(folder) / name, dtype={"param": str, "group": str, "config": str, "task": str,
+                                                     "algo": str}, keep_default_na=True)
 
 
 def render_ladder(folder: Path, out: Path | None = None) -> list[Path]:
@@ -38,15 +50,59 @@ def render_ladder(folder: Path, out: Path | None = None) -> list[Path]:
     return [out / name for name in (*LADDER_FILES, "ladder.png")]
 
 
+def write_tuned_data(folder: Path, sweep, searched: dict, confirmation: pd.DataFrame) -> None:
+    """A tuned comparison's data into ``folder``: ``sweep`` (the resolved SweepFile), ``searched``
+    (algo → its search's trials) and the ``confirmation``'s trials."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / SWEEP).write_text(sweep.dump())
+    for algo, trials in searched.items():
+        trials.to_csv(folder / SEARCH.format(algo=algo), index=False)
+    confirmation.to_csv(folder / CONFIRMATION, index=False)
+
+
+def render_tuned(folder: Path, out: Path | None = None) -> list[Path]:
+    """The tuned comparison's report of ``folder``'s data, written to ``out`` (default: the folder):
+    the sweep file planned again (no Ray, a scratch MLflow store), each algorithm's winners chosen
+    from its search's trials, the comparison made on the confirmation's (sweeps/tuned.py
+    ``tuned_report``, as the run makes it)."""
+    from sweeps import run as cli
+    from sweeps.tuned import tuned_report
+
+    folder, out = Path(folder), Path(out or folder)
+    with tempfile.TemporaryDirectory() as scratch:
+        tp, = cli.make_plan(cli.parse_args(["--config", str(folder / SWEEP), "--storage", scratch,
+                                            "--tracking-uri", f"sqlite:///{scratch}/mlflow.db"]))
+    searched = {algo: read_trials(folder, SEARCH.format(algo=algo)) for algo in tp.searches}
+    _, _, text = tuned_report(tp, searched, read_trials(folder, CONFIRMATION))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / TUNED_REPORT).write_text(text)
+    return [out / TUNED_REPORT]
+
+
+def render(folder: Path, out: Path | None = None) -> list[Path]:
+    """A folder's reports, by what it holds: a tuned comparison's data, or a ladder's trials."""
+    folder = Path(folder)
+    if (folder / CONFIRMATION).is_file() and (folder / SWEEP).is_file():
+        return render_tuned(folder, out)
+    if (folder / TRIALS).is_file():
+        return render_ladder(folder, out)
+    raise ValueError(f"{folder} holds neither {TRIALS} nor {SWEEP} with {CONFIRMATION}; accepted: a ladder's "
+                     "folder or a tuned comparison's (sweeps/reports/rendered.py)")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m sweeps.reports.rendered", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("folder", help=f"an evidence folder holding {TRIALS}")
+    p.add_argument("folder", help=f"an evidence folder: a ladder's {TRIALS}, or a tuned comparison's {SWEEP}, "
+                                  f"{SEARCH} and {CONFIRMATION}")
     p.add_argument("--out", default=None, help="where to write (default: the folder)")
     args = p.parse_args(argv)
-    if not (Path(args.folder) / TRIALS).is_file():
-        p.error(f"{args.folder} has no {TRIALS}; accepted: a folder with the trials its sweep recorded")
-    for path in render_ladder(Path(args.folder), args.out):
+    try:
+        paths = render(Path(args.folder), args.out)
+    except ValueError as e:
+        p.error(str(e))
+    for path in paths:
         print(path)
     return 0
 

@@ -203,6 +203,15 @@ def test_a_tuned_comparison_runs_end_to_end_and_its_registry_round_trips(ray_ses
     assert run_tuned(tp, cli.run_locked) == 0
     out = capsys.readouterr().out
     assert "## Tuned comparison" in out and "Ranking on the fresh seeds" in out
+    # The data the run wrote beside its report renders the same report again, without Ray or MLflow.
+    from sweeps import followup
+    from sweeps.reports import rendered
+
+    here = tmp_path / "rr" / followup.confirmation_name(tp.name)
+    assert sorted(p.name for p in (here / "tuned-data").iterdir()) == [
+        "confirmation.csv", "search-lac.csv", "search-ppo_lag.csv", "sweep.yaml"]
+    rendered.render(here / "tuned-data", tmp_path / "again")
+    assert (tmp_path / "again" / "report.md").read_text() == (here / "tuned.md").read_text()
     registry = tmp_path / "registry"
     for algo in ("lac", "ppo_lag"):
         path, = (registry / "lac/PointHazard-v0" / algo).glob("smoke-b2-*.yaml")  # kept by budget, limit, env
