@@ -1,0 +1,79 @@
+"""Safety-Gymnasium's navigation task layer as array operations over N envs at once.
+
+Each function is the batched form of one piece of safety_gymnasium 1.0.0's per-env Python
+(``safety_gymnasium/bases/base_task.py``, ``bases/base_agent.py``, ``assets/geoms/*``,
+``assets/free_geoms/*``), written so that every value it returns equals the stock one bit for bit:
+the same float operations in the same order, never a shortcut that rounds differently. Where an
+equivalent formula would round otherwise it is named (tests/tasks/test_navigation_layer.py pins
+each choice against the stock expression on random inputs):
+
+- the egocentric vector is ``np.matmul`` of the world vector with the agent's ``xmat``, as
+  ``BaseTask._ego_xy`` does; ``np.einsum`` or a written-out sum differ in the last bit (numpy's
+  matmul kernel, not a left-to-right sum);
+- a lidar distance is ``np.abs`` of the complex number ``x + iy``, as ``_obs_lidar_pseudo`` does;
+  ``np.hypot(x, y)`` differs by one ulp on some inputs;
+- an XY distance is ``sqrt(sum(square(dx, dy)))`` (``BaseAgent.dist_xy``): two terms, so the
+  sum's order is fixed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def ego_xy(points: np.ndarray, agent_pos: np.ndarray, agent_mat: np.ndarray) -> np.ndarray:
+    """(N, K, 2) egocentric XY of ``points`` (N, K, 2 or 3; z ignored) seen from the agent at
+    ``agent_pos`` (N, 3) with rotation ``agent_mat`` (N, 3, 3): ``BaseTask._ego_xy``
+    (``matmul([x, y, 0] − agent_pos, agent_mat)[:2]``) for every point of every env."""
+    world = np.zeros(points.shape[:2] + (3,))
+    world[..., :2] = points[..., :2]
+    world -= agent_pos[:, None, :]
+    return np.matmul(world, agent_mat)[..., :2]
+
+
+def pseudo_lidar(ego: np.ndarray, num_bins: int, max_dist: float | None, exp_gain: float,
+                 alias: bool, valid: np.ndarray | None = None) -> np.ndarray:
+    """(N, num_bins) lidar of the objects at egocentric ``ego`` (N, K, 2): each bin reads the
+    closeness of its nearest object, with aliasing into the neighbouring bins
+    (``BaseTask._obs_lidar_pseudo``). ``valid`` (N, K) leaves objects out (all in by default)."""
+    n, k = ego.shape[:2]
+    z = ego[..., 0] + 1j * ego[..., 1]
+    dist = np.abs(z)
+    angle = np.angle(z) % (np.pi * 2)
+    bin_size = (np.pi * 2) / num_bins
+    bins = (angle / bin_size).astype(np.int64)  # int() of a non-negative float: truncation
+    if max_dist is None:
+        sensor = np.exp(-exp_gain * dist)
+    else:
+        sensor = np.maximum(0, max_dist - dist) / max_dist
+    if valid is not None:
+        sensor = np.where(valid, sensor, 0.0)
+    obs = np.zeros((n, num_bins))
+    rows = np.repeat(np.arange(n), k)
+    # max is exact, so the order in which objects write a bin does not matter
+    np.maximum.at(obs, (rows, bins.ravel()), sensor.ravel())
+    if alias:
+        frac = (angle - bin_size * bins) / bin_size
+        np.maximum.at(obs, (rows, ((bins + 1) % num_bins).ravel()), (frac * sensor).ravel())
+        np.maximum.at(obs, (rows, ((bins - 1) % num_bins).ravel()), ((1 - frac) * sensor).ravel())
+    return obs
+
+
+def dist_xy(points: np.ndarray, agent_pos: np.ndarray) -> np.ndarray:
+    """(N, K) XY distances from the agent (N, 3) to ``points`` (N, K, 2 or 3): ``BaseAgent.dist_xy``."""
+    d = points[..., :2] - agent_pos[:, None, :2]
+    return np.sqrt(np.sum(np.square(d), axis=-1))
+
+
+def hazard_violation(dist: np.ndarray, size: float) -> np.ndarray:
+    """(N,) whether any hazard costs this step: ``Hazards.cal_cost`` adds ``cost · (size − dist)``
+    for each hazard with ``dist <= size``, and the indicator (``constrain_indicator``) is that sum
+    > 0, i.e. some ``dist < size``."""
+    return np.any(size - dist > 0, axis=-1) if dist.shape[-1] else np.zeros(dist.shape[0], bool)
+
+
+def clip_reward(reward: np.ndarray, clip: float | None) -> np.ndarray:
+    """``Builder._reward``'s last resort: a reward outside (−clip, clip) is clipped."""
+    if not clip:
+        return reward
+    return np.where((-clip < reward) & (reward < clip), reward, np.clip(reward, -clip, clip))

@@ -1,0 +1,99 @@
+"""The batched navigation env (lac_rllib/tasks/batched_navigation.py) equals stock Safety-Gymnasium
+step for step on every id it runs (lac_rllib/tasks/navigation_equality.py), and the comparison
+catches an error of one ulp; the array task layer equals safety_gymnasium's own expressions on
+random inputs, and the formulas it avoids would not."""
+
+import numpy as np
+import pytest
+
+from lac_rllib.tasks import navigation_layer as layer
+from lac_rllib.tasks.batched_navigation import BatchedNavigationEnv, supports
+from lac_rllib.tasks.navigation_equality import compare
+
+IDS = [f"Safety{robot}Goal{level}-v0" for robot in ("Point", "Car") for level in (0, 1, 2)]
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_a_short_stream_equals_stock_with_resets_goals_and_costs(env_id):
+    c = compare(env_id, num_envs=3, vector_steps=300, seed=0, max_episode_steps=100)
+    assert c.identical, c.line()
+    assert c.episodes == 6 and c.steps == 3 * 300 - 6  # ends at steps 100 and 201, each then a reset step
+    if "Point" in env_id:
+        assert c.goals > 0, c.line()  # the goal's resampling ran
+    if not env_id.endswith("0-v0"):
+        assert c.cost_steps > 0, c.line()  # a constraint was violated on both sides alike
+
+
+def test_an_error_of_one_ulp_in_a_distance_is_caught(monkeypatch):
+    exact = layer.dist_xy
+    monkeypatch.setattr(layer, "dist_xy", lambda points, agent: np.nextafter(exact(points, agent), np.inf))
+    c = compare("SafetyPointGoal1-v0", num_envs=2, vector_steps=20, seed=0)
+    assert not c.identical and c.mismatches[0] == (1, "reward")
+
+
+def test_the_batched_ids_are_the_goal_tasks_of_point_and_car():
+    assert [f"{r}{t}" for r in ("Point", "Car", "Doggo") for t in ("Goal1", "Button1", "Circle1") if supports(r, t)] \
+        == ["PointGoal1", "CarGoal1"]
+
+
+def test_autoreset_is_gymnasiums_next_step():
+    env = BatchedNavigationEnv("SafetyPointGoal0-v0", 2, max_episode_steps=3)
+    env.reset(seed=1)
+    a = np.zeros((2, 2), np.float32)
+    for _ in range(2):
+        assert not env.step(a)[3].any()
+    assert env.step(a)[3].all()
+    obs, reward, terminated, truncated, info = env.step(a)  # the reset step: first observations, reward 0
+    assert (reward == 0).all() and not (terminated | truncated).any() and "cost" not in info
+    env.close()
+
+
+def _stock_ego(pos, agent_pos, agent_mat):
+    return np.matmul(np.concatenate([pos[:2], [0]]) - agent_pos, agent_mat)[:2]  # BaseTask._ego_xy
+
+
+def _random_frames(n, k, seed=0):
+    rng = np.random.default_rng(seed)
+    points, agent = rng.uniform(-3, 3, (n, k, 3)), rng.uniform(-3, 3, (n, 3))
+    th = rng.uniform(0, 2 * np.pi, n)
+    mat = np.zeros((n, 3, 3))
+    mat[:, 0, 0], mat[:, 0, 1], mat[:, 1, 0], mat[:, 1, 1], mat[:, 2, 2] = np.cos(th), -np.sin(th), np.sin(th), \
+        np.cos(th), 1
+    return points, agent, mat + rng.normal(scale=1e-3, size=mat.shape)
+
+
+def test_the_egocentric_vector_is_stocks_matmul_and_einsum_would_differ():
+    points, agent, mat = _random_frames(400, 8)
+    stock = np.array([[_stock_ego(p, agent[i], mat[i]) for p in points[i]] for i in range(len(points))])
+    assert np.array_equal(layer.ego_xy(points, agent, mat), stock)
+    world = np.concatenate([points[..., :2], np.zeros(points.shape[:2] + (1,))], -1) - agent[:, None]
+    assert not np.array_equal(np.einsum("nki,nij->nkj", world, mat)[..., :2], stock)
+
+
+def _stock_lidar(positions, agent_pos, agent_mat, bins=16, max_dist=3.0):
+    obs = np.zeros(bins)  # BaseTask._obs_lidar_pseudo, alias on
+    for pos in positions:
+        z = complex(*_stock_ego(pos, agent_pos, agent_mat))
+        dist, angle = np.abs(z), np.angle(z) % (np.pi * 2)
+        size = (np.pi * 2) / bins
+        b = int(angle / size)
+        sensor = max(0, max_dist - dist) / max_dist
+        obs[b] = max(obs[b], sensor)
+        alias = (angle - size * b) / size
+        obs[(b + 1) % bins] = max(obs[(b + 1) % bins], alias * sensor)
+        obs[(b - 1) % bins] = max(obs[(b - 1) % bins], (1 - alias) * sensor)
+    return obs
+
+
+def test_the_pseudo_lidar_is_stocks_and_hypot_distances_would_differ():
+    points, agent, mat = _random_frames(400, 10, seed=1)
+    stock = np.array([_stock_lidar(points[i], agent[i], mat[i]) for i in range(len(points))])
+    ego = layer.ego_xy(points, agent, mat)
+    assert np.array_equal(layer.pseudo_lidar(ego, 16, 3.0, 1.0, True), stock)
+    z = ego[..., 0] + 1j * ego[..., 1]
+    assert (np.hypot(ego[..., 0], ego[..., 1]) != np.abs(z)).any()  # why the layer keeps np.abs of x + iy
+
+
+def test_hazard_indicator_is_a_strictly_positive_sum():
+    d = np.array([[0.2, 0.5], [0.1999999, 3.0], [0.3, 0.2000001]])
+    assert layer.hazard_violation(d, 0.2).tolist() == [False, True, False]  # at dist == size the cost is 0
