@@ -3,15 +3,15 @@
 A stock SafetyPointGoal1-v0 step spends ~20% of its time in MuJoCo and the rest in ~830 Python
 calls of safety_gymnasium's task layer (../docs/speed.md). Here each step runs the physics of every
 env (its ``mj_step`` calls and one ``mj_forward``) and then the task layer once for all N envs as
-array operations (lac_rllib/tasks/navigation_layer.py): lidar, reward, the ``cost_*`` indicators,
-the goal test, termination and truncation.
+array operations: lidar and sensors (lac_rllib/tasks/navigation_layer.py), reward, the goal test
+and the ``cost_*`` indicators (lac_rllib/tasks/navigation_rules.py), termination and truncation.
 
 What stays safety_gymnasium's own code, run per env, because it is rare and its random stream
-must be untouched: ``reset`` (layout sampling with its placement retries, the world rebuilt) and
-the goal's resampling when it is reached. Each env is the stock env of lac_rllib/tasks/safety_gym.py
-(compat shim, light resets); this class only replaces its ``step``. The random draws a stock step
-makes (the frame-skip binomial) are made on each env's own generator, in the same order, so every
-later layout is the same.
+must be untouched: ``reset`` (layout sampling with its placement retries, the world rebuilt), the
+goal's resampling when it is reached, and the Button tasks' timer tick. Each env is the stock env
+of lac_rllib/tasks/safety_gym.py (compat shim, light resets); this class only replaces its
+``step``. The random draws a stock step makes (the frame-skip binomial) are made on each env's own
+generator, in the same order, so every later layout is the same.
 
 Equality with the stock envs (every observation, reward, cost, ``cost_*`` key, terminated,
 truncated and every reset's layout) is tested per task id in tests/tasks/test_batched_navigation.py
@@ -34,9 +34,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from lac_rllib.tasks import navigation_layer as layer
+from lac_rllib.tasks import navigation_rules as rules
 
 #: Task families and robots this class steps; the other navigation ids run on the stock backend.
-FAMILIES = ("Goal",)
+FAMILIES = ("Goal", "Button", "Push")
 ROBOTS = ("Point", "Car")
 
 
@@ -53,27 +54,32 @@ class _Sim:
     model: Any
     data: Any
     rng: np.random.RandomState  #: the task's own generator
-    bodies: np.ndarray  #: body ids read each step: the agent, then each lidar group's objects in order
+    bodies: np.ndarray  #: body ids read each step: the agent, then each group's objects in order
     raw: np.ndarray  #: sensordata addresses of the sensors read as they are, in the observation's order
     quats: list  #: sensordata addresses of the ball-joint quaternions (observed as rotation matrices)
-    vase_geom: np.ndarray | None  #: per geom id: a vase's geom (its name starts with "vase")
-    agent_geom: np.ndarray | None  #: per geom id: one of the agent's geoms
+    agent_geom: np.ndarray  #: per geom id: one of the agent's geoms
+    prefixed: dict  #: geom-name prefix (rules.CONTACT_COSTS) → per geom id: its name starts so
+    buttons: np.ndarray  #: geom id of button k
+    mocaps: np.ndarray  #: the gremlins' mocap ids (moved before every physics step)
+    vases: list  #: the vases' body names (their speed is a cost)
     # Views of the data's arrays, taken once (each attribute access of MjData makes a new view).
     ctrl: np.ndarray = None
     xpos: np.ndarray = None
     xmat: np.ndarray = None
     sensordata: np.ndarray = None
+    mocap_pos: np.ndarray = None
 
     def __post_init__(self):
-        self.ctrl, self.xpos, self.xmat = self.data.ctrl, self.data.xpos, self.data.xmat
-        self.sensordata = self.data.sensordata
+        d = self.data
+        self.ctrl, self.xpos, self.xmat = d.ctrl, d.xpos, d.xmat
+        self.sensordata, self.mocap_pos = d.sensordata, d.mocap_pos
 
 
 @dataclasses.dataclass(frozen=True)
 class _Layout:
     """Where each piece of the flat observation comes from (the same for every env of a task)."""
 
-    groups: dict  #: lidar group → slice of ``_Sim.bodies`` (the agent is row 0)
+    groups: dict  #: body group → slice of ``_Sim.bodies`` (the agent is row 0)
     columns: list  #: per observation key in order: ("raw", raw slice) | ("quat", k) | ("lidar", group)
 
 
@@ -84,8 +90,11 @@ class BatchedNavigationEnv(VectorEnv):
 
     def __init__(self, env_id: str, num_envs: int, max_episode_steps: int | None = None,
                  light_resets: bool = True) -> None:
-        from lac_rllib.tasks.safety_gym import episode_steps, make_env
+        from lac_rllib.tasks.safety_gym import _NAV_IDS, episode_steps, make_env
 
+        if env_id not in _NAV_IDS or not supports(*_NAV_IDS[env_id]):
+            raise ValueError(f"{env_id!r} has no batched backend; accepted: the {', '.join(FAMILIES)} tasks of "
+                             f"{', '.join(ROBOTS)}, levels 0-2 (the others run on env_backend: stock)")
         self.env_id, self.num_envs = env_id, int(num_envs)
         cfg = {"env_id": env_id, "light_resets": light_resets}
         if max_episode_steps is not None:
@@ -98,13 +107,13 @@ class BatchedNavigationEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._inner_dtype = first._inner_action_dtype
         task = first.unwrapped.task
+        rules.check(task)
         self._task = task  # its configuration (sizes, rewards, lidar): the same in every env of the id
+        self._rule = rules.RULES[_NAV_IDS[env_id][1].rstrip("012")](task, self.num_envs)
         self._horizon = min(task.num_steps, int(max_episode_steps or episode_steps(env_id)))
         self._layout = _layout(task)
-        self._cost_keys = _cost_keys(task)
         self._sims: list[_Sim | None] = [None] * self.num_envs
         self._steps = np.zeros(self.num_envs, np.int64)
-        self._last_dist = np.zeros(self.num_envs)
         self._autoreset = np.zeros(self.num_envs, bool)
 
     # ------------------------------------------------------------------ reset
@@ -127,9 +136,10 @@ class BatchedNavigationEnv(VectorEnv):
 
     def _reset_one(self, i: int, seed, options):
         o, info = self.envs[i].reset(seed=seed, options=options)
-        self._sims[i] = _attach(self.envs[i].unwrapped.task, self._layout)
+        task = self.envs[i].unwrapped.task
+        self._sims[i] = _attach(task, self._layout)
+        self._rule.reset(i, task)
         self._steps[i] = 0
-        self._last_dist[i] = self._sims[i].task.last_dist_goal
         return o, info
 
     # ------------------------------------------------------------------ step
@@ -149,79 +159,79 @@ class BatchedNavigationEnv(VectorEnv):
         self._autoreset = terminated | truncated
         return obs, rewards, terminated, truncated, infos
 
-    def _step_live(self, live, actions, obs, rewards, terminated, truncated, infos) -> dict:
-        sims = [self._sims[i] for i in live]
-        task, layout = self._task, self._layout
-        # Underlying.simulation_forward: the control clipped to the actuators' range, the frame-skip
-        # draw on the env's own generator, the steps, one forward (the stock step's later forwards
-        # recompute the same derived fields from the same state).
+    def _physics(self, sims, actions) -> None:
+        """``Underlying.simulation_forward``: the control clipped to the actuators' range, the frame-skip
+        draw on the env's own generator, the steps (each after the gremlins' mocaps move), one
+        forward (the stock step's later forwards recompute the same fields from the same state)."""
+        task = self._task
         span = task.model.actuator_ctrlrange
         ctrl = np.clip(actions, span[:, 0], span[:, 1])
         skip_n, skip_p = task.sim_conf.frameskip_binom_n, task.sim_conf.frameskip_binom_p
         step, forward = mujoco.mj_step, mujoco.mj_forward
+        travel, size = (task.gremlins.travel, task.gremlins.size) if sims[0].mocaps.size else (0, 0)
         for j, sim in enumerate(sims):
             m, d = sim.model, sim.data
             sim.ctrl[:] = ctrl[j]
             frames = sim.rng.binomial(skip_n, skip_p)
-            if frames:  # mj_step's nstep: the same steps, one call
-                step(m, d, frames)
+            if not sim.mocaps.size:
+                if frames:  # mj_step's nstep: the same steps, one call
+                    step(m, d, frames)
+            else:
+                for _ in range(frames):  # Gremlins.move: every mocap to (sin t, cos t) · travel
+                    phase = float(d.time)
+                    sim.mocap_pos[sim.mocaps] = np.r_[np.array([np.sin(phase), np.cos(phase)]) * travel, [size]]
+                    step(m, d)
             forward(m, d)
-        xpos = np.stack([s.xpos[s.bodies] for s in sims])
-        agent = xpos[:, 0]
-        # Reward (GoalLevel0.calculate_reward): the progress towards the goal, plus reward_goal inside it.
-        dist = layer.dist_xy(xpos[:, layout.groups["goal"]], agent)[:, 0]
-        reward = (self._last_dist[live] - dist) * task.goal.reward_distance
-        self._last_dist[live] = dist
-        achieved = dist <= task.goal.size
-        reward = np.where(achieved, reward + task.goal.reward_goal, reward)
-        rewards[live] = layer.clip_reward(reward, task.reward_conf.reward_clip)
-        costs = self._costs(sims, xpos)
+
+    def _frame(self, sims) -> rules.Frame:
+        return rules.Frame(xpos=np.stack([s.xpos[s.bodies] for s in sims]), groups=self._layout.groups,
+                           touching=[_touching(s) for s in sims], tasks=[s.task for s in sims])
+
+    def _step_live(self, live, actions, obs, rewards, terminated, truncated, infos) -> dict:
+        sims = [self._sims[i] for i in live]
+        self._physics(sims, actions)
+        frame = self._frame(sims)
+        # Builder.step's order: the reward, the costs, specific_step, then a met goal resampled.
+        reward, achieved = self._rule.reward(frame, live)
+        rewards[live] = layer.clip_reward(reward, self._task.reward_conf.reward_clip)
+        costs = rules.costs(self._task, frame)
         for key, value in costs.items():  # the infos SyncVectorEnv would gather, key by key
             infos = self._add_column(infos, key, value, live)
         infos = self._add_column(infos, "cost", costs["cost_sum"], live)
+        self._rule.step(frame)
         for j in np.flatnonzero(achieved):  # the goal resampled by safety_gymnasium's own code
-            i, sim = live[j], sims[j]
-            sim.task.update_layout()
+            i, task = live[j], sims[j].task
+            task.update_layout()
             try:
-                sim.task.update_world()
-                self._last_dist[i] = sim.task.last_dist_goal
+                task.update_world()
+                self._rule.reset(i, task)
             except _resampling_error():
                 terminated[i] = True
             infos = self._add_info(infos, {"goal_met": True}, i)
-        if achieved.any():
-            xpos = np.stack([s.xpos[s.bodies] for s in sims])
+        xpos = np.stack([s.xpos[s.bodies] for s in sims]) if achieved.any() else frame.xpos
         self._steps[live] += 1
         truncated[live] = self._steps[live] >= self._horizon
         obs[live] = self._observe(sims, xpos)
         return infos
 
     def _add_column(self, infos: dict, key: str, values: np.ndarray, rows: np.ndarray) -> dict:
-        """``key``'s float values for the envs ``rows``, as ``_add_info`` per env would gather them."""
+        """``key``'s float values for the envs ``rows`` (NaN: the env has no such key), as
+        ``_add_info`` per env would gather them."""
+        has = ~np.isnan(values)
+        if not has.any():
+            return infos
         column = infos.get(key)
         if column is None:
             column, mask = np.zeros(self.num_envs), np.zeros(self.num_envs, np.bool_)
         else:
             mask = infos[f"_{key}"]
-        column[rows], mask[rows] = values, True
+        column[rows[has]], mask[rows[has]] = values[has], True
         infos[key], infos[f"_{key}"] = column, mask
         return infos
 
-    def _costs(self, sims, xpos) -> dict[str, np.ndarray]:
-        """The ``cost_*`` indicators in ``BaseTask.calculate_cost``'s order, and their sum's."""
-        out = {}
-        agent = xpos[:, 0]
-        for name, ob in self._cost_keys:
-            if name == "hazards":
-                dist = layer.dist_xy(xpos[:, self._layout.groups["hazards"]], agent)
-                out["cost_hazards"] = layer.hazard_violation(dist, ob.size).astype(float)
-            elif name == "vases":
-                out |= _vase_costs(sims, ob)
-        total = np.any(np.stack(list(out.values())) > 0, axis=0) if out else np.zeros(len(sims), bool)
-        out["cost_sum"] = total.astype(float)
-        return out
-
     def _observe(self, sims, xpos) -> np.ndarray:
-        """``BaseTask.obs`` flattened: the sensors, then each lidar, in the observation's order."""
+        """``BaseTask.obs`` flattened: the sensors, then each lidar, in the observation's order (the
+        buttons' lidar reads 0 while their timer runs: ``ButtonLevel0.obs``)."""
         c = self._task.lidar_conf
         mat = np.stack([s.xmat[s.bodies[0]] for s in sims]).reshape(-1, 3, 3)
         raw = np.stack([s.sensordata[s.raw] for s in sims])
@@ -230,27 +240,34 @@ class BatchedNavigationEnv(VectorEnv):
             if kind == "raw":
                 parts.append(raw[:, what])
             elif kind == "quat":
-                parts.append(np.stack([_quat2mat(s.data.sensordata[s.quats[what]]) for s in sims]))
+                parts.append(np.stack([_quat2mat(s.sensordata[s.quats[what]]) for s in sims]))
             else:
                 ego = layer.ego_xy(xpos[:, self._layout.groups[what]], xpos[:, 0], mat)
-                parts.append(layer.pseudo_lidar(ego, c.num_bins, c.max_dist, c.exp_gain, c.alias))
+                lidar = layer.pseudo_lidar(ego, c.num_bins, c.max_dist, c.exp_gain, c.alias)
+                if what == "buttons":
+                    lidar[[s.task.buttons.timer != 0 for s in sims]] = 0.0
+                parts.append(lidar)
         return np.concatenate(parts, axis=1).astype(self.observation_space.dtype)
 
     def close_extras(self, **kwargs) -> None:
-        for env in self.envs:
+        for env in getattr(self, "envs", ()):  # none where __init__ refused the id
             env.close()
 
 
-def _lidar_bodies(ob) -> list[str]:
-    """The bodies whose positions an obstacle's lidar sees (its ``pos``)."""
-    return ["goal"] if ob.name == "goal" else [f"{ob.name[:-1]}{k}" for k in range(ob.num)]
+def _bodies(ob) -> list[str]:
+    """The bodies of an obstacle, in the order its ``pos`` lists them."""
+    if not hasattr(ob, "num"):
+        return [ob.name]  # the goal, the push box
+    if ob.name == "gremlins":
+        return [f"gremlin{k}obj" for k in range(ob.num)]
+    return [f"{ob.name[:-1]}{k}" for k in range(ob.num)]
 
 
 def _layout(task) -> _Layout:
     groups, at = {}, 1
     for ob in task._obstacles:
-        if ob.is_lidar_observed or (ob.name == "hazards" and ob.is_constrained):
-            k = len(_lidar_bodies(ob))
+        if ob.is_lidar_observed or ob.name in ("goal", "hazards", "push_box"):
+            k = len(_bodies(ob))
             groups[ob.name] = slice(at, at + k)
             at += k
     columns, raw_at = [], 0
@@ -267,25 +284,10 @@ def _layout(task) -> _Layout:
     return _Layout(groups=groups, columns=columns)
 
 
-def _cost_keys(task) -> list:
-    """(name, obstacle) of each constrained obstacle, in ``calculate_cost``'s order."""
-    out = []
-    for ob in task._obstacles:
-        if getattr(ob, "is_constrained", False):
-            if ob.name not in ("hazards", "vases"):
-                raise NotImplementedError(f"the batched backend has no cost for {ob.name}")
-            if ob.name == "vases" and ob.displace_cost:
-                raise NotImplementedError("vases.displace_cost > 0 is not batched")
-            out.append((ob.name, ob))
-    if task._is_load_static_geoms and task.static_geoms_contact_cost:
-        raise NotImplementedError("static geoms' contact cost is not batched")
-    return out
-
-
 def _attach(task, layout: _Layout) -> _Sim:
     """Handles into ``task``'s current world, read in the stock observation's order."""
     model = task.model
-    names = ["agent"] + [b for ob in task._obstacles if ob.name in layout.groups for b in _lidar_bodies(ob)]
+    names = ["agent"] + [b for ob in task._obstacles if ob.name in layout.groups for b in _bodies(ob)]
     raw, quats = [], []
     info = task.agent.sensor_info
     for key in task.obs_info.obs_space_dict.keys():
@@ -294,34 +296,46 @@ def _attach(task, layout: _Layout) -> _Sim:
         sid = model.sensor(key).id
         adr = np.arange(model.sensor_adr[sid], model.sensor_adr[sid] + model.sensor_dim[sid])
         (quats.append(adr) if key in info.ballquat_names else raw.append(adr))
-    vase_geom = agent_geom = None
-    if getattr(task, "vases", None) is not None and task.vases.is_constrained:
-        geoms = [model.geom(g).name for g in range(model.ngeom)]
-        vase_geom = np.array([g.startswith("vase") for g in geoms])
-        agent_geom = np.array([g in task.agent.body_info.geom_names for g in geoms])
+    geoms = [model.geom(g).name for g in range(model.ngeom)]
+    prefixed = {p: np.array([g.startswith(p) for g in geoms]) for p in rules.CONTACT_COSTS.values()}
+    buttons = getattr(task, "buttons", None)
+    gremlins = getattr(task, "gremlins", None)
+    vases = getattr(task, "vases", None)
     return _Sim(task=task, model=model, data=task.data, rng=task.random_generator.random_generator,
                 bodies=np.array([model.body(b).id for b in names], np.int64),
                 raw=np.concatenate(raw) if raw else np.zeros(0, np.int64), quats=quats,
-                vase_geom=vase_geom, agent_geom=agent_geom)
+                agent_geom=np.array([g in task.agent.body_info.geom_names for g in geoms]), prefixed=prefixed,
+                buttons=np.array([model.geom(f"button{k}").id for k in range(buttons.num)] if buttons else [], int),
+                mocaps=np.array([model.body_mocapid[model.body(f"gremlin{k}mocap").id] for k in range(gremlins.num)]
+                                if gremlins else [], int),
+                vases=[f"vase{k}" for k in range(vases.num)] if vases is not None and vases.is_constrained
+                and vases.velocity_cost else [])
 
 
-def _vase_costs(sims, vases) -> dict[str, np.ndarray]:
-    """``Vases.cal_cost``: an agent geom touching a vase; a vase moving at ≥ the velocity threshold
-    (its speed from ``get_body_xvelp``: the body's Jacobian times qvel, as the stock code has it)."""
-    from safety_gymnasium.utils.task_utils import get_body_xvelp
+def _touching(s: _Sim) -> dict:
+    """What an agent geom touches this step (``data.contact``, as the stock costs scan it): per
+    geom-name prefix, the goal button, a wrong button; and whether a vase moves (speed ≥ threshold)."""
+    out = {}
+    k = s.data.ncon
+    if k:
+        c = s.data.contact
+        g1, g2 = np.asarray(c.geom1[:k]), np.asarray(c.geom2[:k])
+        agent = s.agent_geom[g1] | s.agent_geom[g2]
+        for prefix, mask in s.prefixed.items():
+            out[prefix] = bool(((mask[g1] | mask[g2]) & agent).any())
+        if s.buttons.size:
+            goal = s.buttons[s.task.buttons.goal_button]
+            on_goal = (g1 == goal) | (g2 == goal)
+            out["goal_button"] = bool((on_goal & agent).any())
+            out["wrong_button"] = bool(((s.prefixed["button"][g1] | s.prefixed["button"][g2]) & agent & ~on_goal).any())
+    else:
+        out = dict.fromkeys((*rules.CONTACT_COSTS.values(), "goal_button", "wrong_button"), False)
+    if s.vases:
+        from safety_gymnasium.utils.task_utils import get_body_xvelp
 
-    contact, moving = np.zeros(len(sims)), np.zeros(len(sims))
-    for j, s in enumerate(sims):
-        if vases.contact_cost:
-            c, k = s.data.contact, s.data.ncon
-            g1, g2 = np.asarray(c.geom1[:k]), np.asarray(c.geom2[:k])
-            contact[j] = float(((s.vase_geom[g1] | s.vase_geom[g2]) & (s.agent_geom[g1] | s.agent_geom[g2])).any())
-        if vases.velocity_cost:
-            moving[j] = float(any(np.sqrt(np.sum(np.square(get_body_xvelp(s.model, s.data, f"vase{v}"))))
-                                  >= vases.velocity_threshold for v in range(vases.num)))
-    out = {"cost_vases_contact": contact}
-    if vases.velocity_cost:
-        out["cost_vases_velocity"] = moving
+        threshold = s.task.vases.velocity_threshold
+        out["vase_moving"] = any(np.sqrt(np.sum(np.square(get_body_xvelp(s.model, s.data, v)))) >= threshold
+                                 for v in s.vases)
     return out
 
 
