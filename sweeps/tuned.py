@@ -28,6 +28,9 @@ from sweeps.seeds import fresh_seeds, seeds_text
 from sweeps.sweep_file import SweepFile, check_fields
 
 TUNE = "tune"
+#: The data a tuned comparison's report is rendered from (sweeps/reports/rendered.py renders it again):
+#: the resolved sweep file, each search's trials, the confirmation's trials.
+SWEEP, SEARCH, CONFIRMATION = "sweep.yaml", "search-{algo}.csv", "confirmation.csv"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -269,7 +272,6 @@ def run_tuned(tp: TunedPlan, run_plan) -> int:
         if rc != 0:
             return rc
     from sweeps.record import parent_run_id
-    from sweeps.reports.rendered import write_tuned_data
     from sweeps.tuned_registry import write_entries
 
     trials, _ = followup.read_back(confirmation)
@@ -285,6 +287,17 @@ def run_tuned(tp: TunedPlan, run_plan) -> int:
     print(text)
     print("registry: " + ", ".join(str(p) for p in written), flush=True)
     return 0
+
+
+def write_tuned_data(folder: Path, sweep: SweepFile, searched: dict, confirmation: pd.DataFrame) -> None:
+    """A tuned comparison's data into ``folder``: ``sweep`` (the resolved SweepFile), ``searched``
+    (algo → its search's trials) and the ``confirmation``'s trials."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / SWEEP).write_text(sweep.dump())
+    for algo, trials in searched.items():
+        trials.to_csv(folder / SEARCH.format(algo=algo), index=False)
+    confirmation.to_csv(folder / CONFIRMATION, index=False)
 
 
 def _finished(plan: Plan, sweep_dir: Path) -> bool:

@@ -8,7 +8,8 @@ An evidence folder commits the trials its sweeps recorded and the reports render
 - a tuned comparison (docs/tuned-pointhazard/): ``sweep.yaml`` (the resolved sweep file with its
   ``tune:``), ``search-ALGO.csv`` (each search's trials with the values it searched) and
   ``confirmation.csv`` (the confirmation's trials), as the run writes them (``tuned-data/`` in the
-  confirmation's directory) → ``report.md``, the report the run printed.
+  confirmation's directory: sweeps/tuned.py ``write_tuned_data``) → ``report.md``, the report the
+  run printed.
 
 ``python -m sweeps.reports.rendered DIR`` renders a folder again; tests/sweeps/reports/test_rendered.py
 does so for every such folder and compares the figures, so a report in docs/ always says what its
@@ -27,8 +28,6 @@ import pandas as pd
 TRIALS = "trials.csv"
 #: What a ladder folder's rendering writes (ladder.png beside them).
 LADDER_FILES = ("ladder.md", "ladder.csv", "frontier_points.csv")
-#: A tuned comparison's data: its sweep file, each search's trials, the confirmation's trials.
-SWEEP, SEARCH, CONFIRMATION = "sweep.yaml", "search-{algo}.csv", "confirmation.csv"
 #: What a tuned folder's rendering writes.
 TUNED_REPORT = "report.md"
 
@@ -50,29 +49,21 @@ def render_ladder(folder: Path, out: Path | None = None) -> list[Path]:
     return [out / name for name in (*LADDER_FILES, "ladder.png")]
 
 
-def write_tuned_data(folder: Path, sweep, searched: dict, confirmation: pd.DataFrame) -> None:
-    """A tuned comparison's data into ``folder``: ``sweep`` (the resolved SweepFile), ``searched``
-    (algo → its search's trials) and the ``confirmation``'s trials."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / SWEEP).write_text(sweep.dump())
-    for algo, trials in searched.items():
-        trials.to_csv(folder / SEARCH.format(algo=algo), index=False)
-    confirmation.to_csv(folder / CONFIRMATION, index=False)
-
-
 def render_tuned(folder: Path, out: Path | None = None) -> list[Path]:
     """The tuned comparison's report of ``folder``'s data, written to ``out`` (default: the folder):
     the sweep file planned again (no Ray, a scratch MLflow store), each algorithm's winners chosen
     from its search's trials, the comparison made on the confirmation's (sweeps/tuned.py
     ``tuned_report``, as the run makes it)."""
-    from sweeps import run as cli
-    from sweeps.tuned import tuned_report
+    from sweeps import sweep_file
+    from sweeps.infra import Infra
+    from sweeps.tuned import CONFIRMATION, SEARCH, SWEEP, make_tuned_plan, tuned_report
 
     folder, out = Path(folder), Path(out or folder)
+    sweep = sweep_file.load(folder / SWEEP)  # resolved when the run wrote it: planned as it stands
     with tempfile.TemporaryDirectory() as scratch:
-        tp, = cli.make_plan(cli.parse_args(["--config", str(folder / SWEEP), "--storage", scratch,
-                                            "--tracking-uri", f"sqlite:///{scratch}/mlflow.db"]))
+        infra = Infra(address=None, address_from=None, tracking_uri=f"sqlite:///{scratch}/mlflow.db", storage=scratch,
+                      resume=False, max_failures=0, optuna_seed=0)
+        tp = make_tuned_plan(sweep, Path(SWEEP).stem, infra)
     searched = {algo: read_trials(folder, SEARCH.format(algo=algo)) for algo in tp.searches}
     _, _, text = tuned_report(tp, searched, read_trials(folder, CONFIRMATION))
     out.mkdir(parents=True, exist_ok=True)
@@ -82,6 +73,8 @@ def render_tuned(folder: Path, out: Path | None = None) -> list[Path]:
 
 def render(folder: Path, out: Path | None = None) -> list[Path]:
     """A folder's reports, by what it holds: a tuned comparison's data, or a ladder's trials."""
+    from sweeps.tuned import CONFIRMATION, SWEEP
+
     folder = Path(folder)
     if (folder / CONFIRMATION).is_file() and (folder / SWEEP).is_file():
         return render_tuned(folder, out)
@@ -94,8 +87,8 @@ def render(folder: Path, out: Path | None = None) -> list[Path]:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m sweeps.reports.rendered", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("folder", help=f"an evidence folder: a ladder's {TRIALS}, or a tuned comparison's {SWEEP}, "
-                                  f"{SEARCH} and {CONFIRMATION}")
+    p.add_argument("folder", help=f"an evidence folder: a ladder's {TRIALS}, or a tuned comparison's sweep.yaml, "
+                                  "search-ALGO.csv and confirmation.csv")
     p.add_argument("--out", default=None, help="where to write (default: the folder)")
     args = p.parse_args(argv)
     try:
