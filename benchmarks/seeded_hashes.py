@@ -2,6 +2,7 @@
 
     python benchmarks/seeded_hashes.py --task SafetyPointGoal1-v0 --iterations 2
     python benchmarks/seeded_hashes.py --task lac/PointHazard-v0 --iterations 3 --algos ppo_lag,cpo
+    python benchmarks/seeded_hashes.py --algos lac,ppo_lag --set env_backend=stock   # the other backend
     PYTHONPATH=TREE python benchmarks/seeded_hashes.py ...   # the code unpacked at another revision
 
 Each algorithm of the registry is built at its task preset from one seed (``--seed``), trains
@@ -15,6 +16,7 @@ Prints one ``algo  hash`` line per algorithm, then the wall seconds it took.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import sys
@@ -49,13 +51,13 @@ def _row(result: dict, reported: tuple[str, ...]) -> dict:
     return {k: v for k, v in row.items() if "time" not in k and not k.endswith("_s")}
 
 
-def run_hash(algo: str, task: str, seed: int, iterations: int, timesteps: int) -> str:
+def run_hash(algo: str, task: str, seed: int, iterations: int, timesteps: int, sets: dict | None = None) -> str:
     from ray.rllib.core import DEFAULT_MODULE_ID  # noqa: F401  (RLlib loaded before the build)
 
     from lac_rllib.algorithms.registry import build_config
 
     torch.set_num_threads(1)
-    config = build_config(algo, task, seed, {}, timesteps=timesteps)
+    config = build_config(algo, task, seed, dict(sets or {}), timesteps=timesteps)
     reported = tuple(type(config).REPORTED_KEYS)  # the learner's values (losses) each row carries
     algo_obj = config.build_algo()
     try:
@@ -81,16 +83,23 @@ def main(argv=None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--timesteps", type=int, default=500_000, help="the runs' horizon (lr decays)")
     parser.add_argument("--algos", default=",".join(ALGOS), metavar="A,B,...")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="a field set in every run, e.g. env_backend=stock")
     args = parser.parse_args(argv)
     algos = args.algos.split(",")
     unknown = [a for a in algos if a not in ALGOS]
     if unknown:
         parser.error(f"--algos {','.join(unknown)}: unknown; accepted: {','.join(ALGOS)}")
+    from lac_rllib.constrained.fields import parse_sets
+    from lac_rllib.constrained.task_config import SafeTaskParams
+
+    shared = {f.name for f in dataclasses.fields(SafeTaskParams)}  # fields every algorithm has
+    sets = parse_sets(args.set, shared, what="shared") if args.set else {}
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         for algo in algos:
             start = time.perf_counter()
-            digest = run_hash(algo, args.task, args.seed, args.iterations, args.timesteps)
+            digest = run_hash(algo, args.task, args.seed, args.iterations, args.timesteps, sets)
             print(f"{algo:10s} {digest}  ({time.perf_counter() - start:.0f} s)", flush=True)
     finally:
         ray.shutdown()

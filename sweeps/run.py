@@ -216,6 +216,9 @@ def print_plan(plan: Plan) -> None:
     print(f"  env steps per trial: {plan.timesteps:,}   "
           f"concurrency: {plan.concurrency} x {sweep.cpus_per_trial} CPU"
           f"{'' if not infra.address else f' (cluster {infra.address} from {infra.address_from}: capped by its CPUs)'}")
+    backends = env_backends(plan)
+    if backends:
+        print(f"  env backend: {backends}")
     print(f"  estimated wall time: {duration_text(plan.estimated_wall_s)} at {plan.concurrency} trials at a time, "
           f"{plan.estimated_cpu_h:.1f} CPU-hours (rough; calibrated: {plan.calibration[1]})")
     if plan.estimated_wall_s > 4 * 3600 and not infra.address:
@@ -234,6 +237,20 @@ def print_plan(plan: Plan) -> None:
     if plan.optuna_storage:
         print(f"  Optuna study '{plan.name}': {plan.optuna_storage}  (optuna-dashboard {plan.optuna_storage})")
     print(f"  browse: mlflow ui --backend-store-uri {infra.tracking_uri}", flush=True)
+
+
+def env_backends(plan: Plan) -> str:
+    """Which backend each task's envs step on (``env_backend``: lac_rllib/tasks/batched_navigation.py),
+    read from the trials' env fingerprints; empty where no task of the sweep has a batched one."""
+    per_task: dict[str, set] = {}
+    for fp in plan.env_fingerprints.values():
+        per_task.setdefault(fp["task"], set()).add(fp.get("env_backend"))
+    if not any(b for bs in per_task.values() for b in bs):
+        return ""
+    parts = [f"{task} {' and '.join(sorted(b or 'stock' for b in bs))}" + ("" if any(bs) else " (no batched one)")
+             for task, bs in per_task.items()]
+    return "; ".join(parts) if len(parts) <= 4 else (
+        f"{sum('batched' in p for p in parts)} of {len(parts)} tasks batched, the others stock")
 
 
 def one_line(text: str, limit: int = 600) -> str:

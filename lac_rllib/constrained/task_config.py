@@ -22,9 +22,10 @@ from ray.tune.registry import register_env
 
 from lac_rllib.constrained.costs import EpisodeCostCallback
 from lac_rllib.constrained.cpus import OneThreadPerEnvRunner, set_runners
-from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, or_none, param
+from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
+from lac_rllib.tasks.registry import ENV_BACKENDS
 
 
 @dataclasses.dataclass
@@ -36,6 +37,12 @@ class SafeTaskParams:
     """b; None = the task's limit (docs/spec.md §6)."""
     episode_cost_discount: float | None = param(None, accepts=or_none(FRACTION))
     """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
+
+    env_backend: str = param("batched", accepts=one_of(ENV_BACKENDS))
+    """How a navigation task with a batched backend (Point and Car × Goal, Button, Push, levels 0-2)
+    steps its envs: "batched" (one vector env, lac_rllib/tasks/batched_navigation.py, equal to
+    Safety-Gymnasium step for step) or "stock" (gymnasium's SyncVectorEnv of stock envs). Every
+    other task runs stock whatever this says. Named in the env fingerprint."""
 
     # --- observation filter ---
     obs_normalization: bool = param(True, accepts=BOOL)
@@ -176,7 +183,18 @@ class SafeTaskConfig:
         self.environment(env=task_id)
         if PRESET_FIELD in self.FIELDS.names:
             setattr(self, PRESET_FIELD, name)
+        self._apply_env_backend()
         return self
+
+    def _apply_env_backend(self) -> None:
+        """RLlib's door for a vector env: with the batched backend, the env runners build the env
+        through gymnasium's vector entry point (the task's factory gets ``num_envs``), else as
+        gymnasium's SyncVectorEnv of single envs (RLlib's default)."""
+        spec = self.task_spec
+        batched = bool(spec is not None and spec.batched and self.env_backend == "batched")
+        self.gym_env_vectorize_mode = "vector_entry_point" if batched else "sync"
+        if spec is not None and spec.batched:
+            self.env_config = {**dict(self.env_config or {}), "env_backend": self.env_backend}
 
     def preset_values(self, name: str) -> dict[str, Any]:
         """The field values of the preset ``name`` (an unknown one raises a ValueError listing them)."""
@@ -203,6 +221,8 @@ class SafeTaskConfig:
                 value = tuple(value)
             self.FIELDS.check(name, value)
             setattr(self, name, value)
+        if "env_backend" in own and self.task_id:
+            self._apply_env_backend()
         return self
 
     @override(AlgorithmConfig)

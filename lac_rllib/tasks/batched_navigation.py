@@ -9,9 +9,9 @@ and the ``cost_*`` indicators (lac_rllib/tasks/navigation_rules.py), termination
 What stays safety_gymnasium's own code, run per env, because it is rare and its random stream
 must be untouched: ``reset`` (layout sampling with its placement retries, the world rebuilt), the
 goal's resampling when it is reached, and the Button tasks' timer tick. Each env is the stock env
-of lac_rllib/tasks/safety_gym.py (compat shim, light resets); this class only replaces its
-``step``. The random draws a stock step makes (the frame-skip binomial) are made on each env's own
-generator, in the same order, so every later layout is the same.
+of lac_rllib/tasks/safety_gym.py (compat shim, light resets: ``make_batched`` builds them); this
+class only replaces their ``step``. The random draws a stock step makes (the frame-skip binomial)
+are made on each env's own generator, in the same order, so every later layout is the same.
 
 Equality with the stock envs (every observation, reward, cost, ``cost_*`` key, terminated,
 truncated and every reset's layout) is tested per task id in tests/tasks/test_batched_navigation.py
@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -35,15 +34,6 @@ from gymnasium.vector.utils import batch_space
 
 from lac_rllib.tasks import navigation_layer as layer
 from lac_rllib.tasks import navigation_rules as rules
-
-#: Task families and robots this class steps; the other navigation ids run on the stock backend.
-FAMILIES = ("Goal", "Button", "Push")
-ROBOTS = ("Point", "Car")
-
-
-def supports(robot: str, task: str) -> bool:
-    """Whether ``Safety{robot}{task}-v0`` runs on the batched backend."""
-    return robot in ROBOTS and task.rstrip("0123456789") in FAMILIES and task[-1] in "012"
 
 
 @dataclasses.dataclass
@@ -88,18 +78,11 @@ class BatchedNavigationEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, env_id: str, num_envs: int, max_episode_steps: int | None = None,
-                 light_resets: bool = True) -> None:
-        from lac_rllib.tasks.safety_gym import _NAV_IDS, episode_steps, make_env
-
-        if env_id not in _NAV_IDS or not supports(*_NAV_IDS[env_id]):
-            raise ValueError(f"{env_id!r} has no batched backend; accepted: the {', '.join(FAMILIES)} tasks of "
-                             f"{', '.join(ROBOTS)}, levels 0-2 (the others run on env_backend: stock)")
-        self.env_id, self.num_envs = env_id, int(num_envs)
-        cfg = {"env_id": env_id, "light_resets": light_resets}
-        if max_episode_steps is not None:
-            cfg["max_episode_steps"] = int(max_episode_steps)
-        self.envs = [make_env(cfg) for _ in range(self.num_envs)]
+    def __init__(self, envs: list, family: str, horizon: int) -> None:
+        """``envs``: stock envs of one task (lac_rllib/tasks/safety_gym.py ``make_env``; this class
+        steps them, their own code resets them); ``family``: Goal, Button or Push; ``horizon``:
+        the episode's steps before truncation. Built by ``safety_gym.make_batched``."""
+        self.envs, self.num_envs = list(envs), len(envs)
         first = self.envs[0]
         self.single_observation_space = first.observation_space
         self.single_action_space = first.action_space
@@ -109,8 +92,8 @@ class BatchedNavigationEnv(VectorEnv):
         task = first.unwrapped.task
         rules.check(task)
         self._task = task  # its configuration (sizes, rewards, lidar): the same in every env of the id
-        self._rule = rules.RULES[_NAV_IDS[env_id][1].rstrip("012")](task, self.num_envs)
-        self._horizon = min(task.num_steps, int(max_episode_steps or episode_steps(env_id)))
+        self._rule = rules.RULES[family](task, self.num_envs)
+        self._horizon = min(task.num_steps, int(horizon))
         self._layout = _layout(task)
         self._sims: list[_Sim | None] = [None] * self.num_envs
         self._steps = np.zeros(self.num_envs, np.int64)
@@ -235,6 +218,11 @@ class BatchedNavigationEnv(VectorEnv):
         c = self._task.lidar_conf
         mat = np.stack([s.xmat[s.bodies[0]] for s in sims]).reshape(-1, 3, 3)
         raw = np.stack([s.sensordata[s.raw] for s in sims])
+        # Every lidar at once: one egocentric transform and one pass over all the objects seen.
+        seen = [what for kind, what in self._layout.columns if kind == "lidar"]
+        ego = layer.ego_xy(xpos[:, 1:], xpos[:, 0], mat)
+        shifted = [slice(self._layout.groups[g].start - 1, self._layout.groups[g].stop - 1) for g in seen]
+        lidars = dict(zip(seen, layer.pseudo_lidars(ego, shifted, c.num_bins, c.max_dist, c.exp_gain, c.alias)))
         parts = []
         for kind, what in self._layout.columns:
             if kind == "raw":
@@ -242,8 +230,7 @@ class BatchedNavigationEnv(VectorEnv):
             elif kind == "quat":
                 parts.append(np.stack([_quat2mat(s.sensordata[s.quats[what]]) for s in sims]))
             else:
-                ego = layer.ego_xy(xpos[:, self._layout.groups[what]], xpos[:, 0], mat)
-                lidar = layer.pseudo_lidar(ego, c.num_bins, c.max_dist, c.exp_gain, c.alias)
+                lidar = lidars[what]
                 if what == "buttons":
                     lidar[[s.task.buttons.timer != 0 for s in sims]] = 0.0
                 parts.append(lidar)
@@ -297,7 +284,9 @@ def _attach(task, layout: _Layout) -> _Sim:
         adr = np.arange(model.sensor_adr[sid], model.sensor_adr[sid] + model.sensor_dim[sid])
         (quats.append(adr) if key in info.ballquat_names else raw.append(adr))
     geoms = [model.geom(g).name for g in range(model.ngeom)]
-    prefixed = {p: np.array([g.startswith(p) for g in geoms]) for p in rules.CONTACT_COSTS.values()}
+    needed = [rules.CONTACT_COSTS[ob.name] for ob in task._obstacles
+              if ob.name in rules.CONTACT_COSTS and getattr(ob, "is_constrained", False)]
+    prefixed = {p: np.array([g.startswith(p) for g in geoms]) for p in needed}
     buttons = getattr(task, "buttons", None)
     gremlins = getattr(task, "gremlins", None)
     vases = getattr(task, "vases", None)
@@ -317,6 +306,8 @@ def _touching(s: _Sim) -> dict:
     geom-name prefix, the goal button, a wrong button; and whether a vase moves (speed ≥ threshold)."""
     out = {}
     k = s.data.ncon
+    if not (s.prefixed or s.buttons.size or s.vases):
+        return out  # the task decides nothing by contact (Goal0, Goal1, Push0, Push1)
     if k:
         c = s.data.contact
         g1, g2 = np.asarray(c.geom1[:k]), np.asarray(c.geom2[:k])
@@ -327,9 +318,11 @@ def _touching(s: _Sim) -> dict:
             goal = s.buttons[s.task.buttons.goal_button]
             on_goal = (g1 == goal) | (g2 == goal)
             out["goal_button"] = bool((on_goal & agent).any())
-            out["wrong_button"] = bool(((s.prefixed["button"][g1] | s.prefixed["button"][g2]) & agent & ~on_goal).any())
+            if "button" in s.prefixed:
+                button = s.prefixed["button"][g1] | s.prefixed["button"][g2]
+                out["wrong_button"] = bool((button & agent & ~on_goal).any())
     else:
-        out = dict.fromkeys((*rules.CONTACT_COSTS.values(), "goal_button", "wrong_button"), False)
+        out = dict.fromkeys((*s.prefixed, "goal_button", "wrong_button"), False)
     if s.vases:
         from safety_gymnasium.utils.task_utils import get_body_xvelp
 
@@ -350,8 +343,3 @@ def _resampling_error():
     from safety_gymnasium.utils.common_utils import ResamplingError
 
     return ResamplingError
-
-
-def make_batched(env_id: str, num_envs: int, **kwargs) -> gym.vector.VectorEnv:
-    """The vector env of ``num_envs`` envs of ``env_id`` on the batched backend."""
-    return BatchedNavigationEnv(env_id, num_envs, **kwargs)

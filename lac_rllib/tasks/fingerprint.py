@@ -4,7 +4,8 @@ The same task id is not the same environment across simulator versions (SafePO#2
 against Safety-Gymnasium numbers; omnisafe#127, #311), envs per runner (safety-gymnasium#40: vector
 env counts change what the algorithm sees), cost conventions or observation filters, and the
 bfloat16 kernels some algorithms pick by CPU (lac_rllib/constrained/precision.py) compute
-differently on a CPU without them. Every sweep trial records its fingerprint (MLflow tag
+differently on a CPU without them, and the backend a navigation task steps on (batched or stock:
+equal step for step, yet named, so a claim rests on one). Every sweep trial records its fingerprint (MLflow tag
 ``lac.env_fingerprint``, the whole in ``lac.env_fingerprint_json``); reports, the frontier,
 confirmation and the registry of tuned configurations never rank runs whose fingerprints differ
 (sweeps/reports/results.py). Plain data, no Ray.
@@ -49,6 +50,8 @@ def fingerprint(task: str, params: dict, num_env_runners: int = 0) -> dict[str, 
         # changes nothing the run computes, and a mixed cluster's runs stay comparable.
         "cpu_bf16": bool(cpu_flags() & set(BF16_FLAGS)) if any(
             k.endswith("_dtype") and v == "auto" for k, v in params.items()) else None,
+        # Only where the task has a batched backend (a key elsewhere would change every other id).
+        **({"env_backend": params.get("env_backend") or "batched"} if spec.batched else {}),
     }
 
 

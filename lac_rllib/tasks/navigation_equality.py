@@ -78,12 +78,11 @@ def compare(env_id: str, num_envs: int = 4, vector_steps: int = 500, seed: int =
     vector env built alike, e.g. one with a deliberate error), seeded ``seed``, compared."""
     from gymnasium.vector import SyncVectorEnv
 
-    from lac_rllib.tasks.batched_navigation import BatchedNavigationEnv
-    from lac_rllib.tasks.safety_gym import make_env
+    from lac_rllib.tasks.safety_gym import make_batched, make_env
 
     cfg = {"env_id": env_id} | ({"max_episode_steps": max_episode_steps} if max_episode_steps else {})
     stock = SyncVectorEnv([lambda: make_env(cfg) for _ in range(num_envs)])
-    fast = batched or BatchedNavigationEnv(env_id, num_envs, max_episode_steps=max_episode_steps)
+    fast = batched or make_batched(env_id, num_envs, max_episode_steps)
     out = Comparison(env_id, num_envs)
     o1, _ = stock.reset(seed=seed)
     o2, _ = fast.reset(seed=seed)

@@ -4,7 +4,7 @@ Each function is the batched form of one piece of safety_gymnasium 1.0.0's per-e
 (``safety_gymnasium/bases/base_task.py``, ``bases/base_agent.py``, ``assets/geoms/*``,
 ``assets/free_geoms/*``), written so that every value it returns equals the stock one bit for bit:
 the same float operations in the same order, never a shortcut that rounds differently. Where an
-equivalent formula would round otherwise it is named (tests/tasks/test_navigation_layer.py pins
+equivalent formula would round otherwise it is named (tests/tasks/test_batched_navigation.py pins
 each choice against the stock expression on random inputs):
 
 - the egocentric vector is ``np.matmul`` of the world vector with the agent's ``xmat``, as
@@ -32,11 +32,19 @@ def ego_xy(points: np.ndarray, agent_pos: np.ndarray, agent_mat: np.ndarray) -> 
 
 
 def pseudo_lidar(ego: np.ndarray, num_bins: int, max_dist: float | None, exp_gain: float,
-                 alias: bool, valid: np.ndarray | None = None) -> np.ndarray:
+                 alias: bool) -> np.ndarray:
     """(N, num_bins) lidar of the objects at egocentric ``ego`` (N, K, 2): each bin reads the
     closeness of its nearest object, with aliasing into the neighbouring bins
-    (``BaseTask._obs_lidar_pseudo``). ``valid`` (N, K) leaves objects out (all in by default)."""
-    n, k = ego.shape[:2]
+    (``BaseTask._obs_lidar_pseudo``)."""
+    return pseudo_lidars(ego, [slice(0, ego.shape[1])], num_bins, max_dist, exp_gain, alias)[0]
+
+
+def pseudo_lidars(ego: np.ndarray, groups: list[slice], num_bins: int, max_dist: float | None, exp_gain: float,
+                  alias: bool) -> list[np.ndarray]:
+    """One (N, num_bins) lidar per group of objects (``groups``: slices of ``ego``'s K objects),
+    every object's distance, angle and bin computed in one pass. A bin is the max over its
+    objects' readings (exact in any order), taken over a one-hot (N, K, bins) array rather than
+    written object by object."""
     z = ego[..., 0] + 1j * ego[..., 1]
     dist = np.abs(z)
     angle = np.angle(z) % (np.pi * 2)
@@ -46,17 +54,33 @@ def pseudo_lidar(ego: np.ndarray, num_bins: int, max_dist: float | None, exp_gai
         sensor = np.exp(-exp_gain * dist)
     else:
         sensor = np.maximum(0, max_dist - dist) / max_dist
-    if valid is not None:
-        sensor = np.where(valid, sensor, 0.0)
-    obs = np.zeros((n, num_bins))
-    rows = np.repeat(np.arange(n), k)
-    # max is exact, so the order in which objects write a bin does not matter
-    np.maximum.at(obs, (rows, bins.ravel()), sensor.ravel())
+    slots = np.arange(num_bins)
+    reads = [(bins, sensor)]
     if alias:
         frac = (angle - bin_size * bins) / bin_size
-        np.maximum.at(obs, (rows, ((bins + 1) % num_bins).ravel()), (frac * sensor).ravel())
-        np.maximum.at(obs, (rows, ((bins - 1) % num_bins).ravel()), ((1 - frac) * sensor).ravel())
-    return obs
+        reads += [((bins + 1) % num_bins, frac * sensor), ((bins - 1) % num_bins, (1 - frac) * sensor)]
+    n = ego.shape[0]
+    filled = [g for g in groups if g.stop > g.start]
+    obs = np.zeros((n, len(filled), num_bins))
+    order = sorted(filled, key=lambda g: g.start)
+    adjacent = all(a.stop == b.start for a, b in zip(order, order[1:]))
+    for b, value in reads:
+        one_hot = np.where(b[..., None] == slots, value[..., None], 0.0)  # (N, K, bins)
+        if filled and adjacent:  # groups back to back: one reduceat at their starts
+            span = one_hot[:, order[0].start:order[-1].stop]
+            best = np.maximum.reduceat(span, [g.start - order[0].start for g in order], axis=1)
+            np.maximum(obs, best[:, [order.index(g) for g in filled]], out=obs)
+        else:
+            for k, g in enumerate(filled):
+                np.maximum(obs[:, k], one_hot[:, g].max(axis=1), out=obs[:, k])
+    out, k = [], 0
+    for g in groups:
+        if g.stop > g.start:
+            out.append(obs[:, k])
+            k += 1
+        else:
+            out.append(np.zeros((n, num_bins)))
+    return out
 
 
 def dist_xy(points: np.ndarray, agent_pos: np.ndarray) -> np.ndarray:

@@ -124,7 +124,7 @@ def costs(task, f: Frame) -> dict[str, np.ndarray]:
             out["cost_buttons"] = np.where(active, [float(t["wrong_button"]) for t in f.touching], np.nan)
         else:
             out[f"cost_{ob.name}"] = np.array([float(t[CONTACT_COSTS[ob.name]]) for t in f.touching])
-    values = [np.nan_to_num(v) for v in out.values()]
+    values = list(out.values())  # NaN (no such key in that env) > 0 is False
     out["cost_sum"] = (np.any(np.stack(values) > 0, axis=0) if values else np.zeros(len(f.tasks), bool)).astype(float)
     return out
 

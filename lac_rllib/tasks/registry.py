@@ -18,6 +18,8 @@ import gymnasium as gym
 
 #: Preset names understood by ``LACConfig.preset`` (docs/spec.md §5 columns).
 MUJOCO, SAFETY_GYM, TINY = "mujoco", "safety_gym", "tiny"
+#: How a task with a batched backend steps its envs (the ``env_backend`` field of every algorithm).
+ENV_BACKENDS = ("batched", "stock")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,6 +61,10 @@ class TaskSpec:
     #: tasks') where a task does not say; Circle and Run are 500. A planning figure, left out of a
     #: spec's equality as ``step_cost`` is.
     episode_steps: int = dataclasses.field(default=1000, compare=False)
+    #: Whether its factory also builds a batched vector env (given ``num_envs``, with
+    #: ``env_backend: batched``): lac_rllib/tasks/batched_navigation.py. A way to step the same env,
+    #: not part of what the task is: left out of a spec's equality (the fingerprint names the backend).
+    batched: bool = dataclasses.field(default=False, compare=False)
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""

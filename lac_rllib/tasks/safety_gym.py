@@ -96,14 +96,21 @@ class SafetyToGymnasium(gym.Wrapper):
         )
 
 
-def make_env(env_config: dict | None = None) -> gym.Env:
-    """Build one env of a Safety-Gymnasium task (any process; applies the compat patches)."""
+def make_env(env_config: dict | None = None) -> gym.Env | gym.vector.VectorEnv:
+    """Build one env of a Safety-Gymnasium task (any process; applies the compat patches). Given
+    ``num_envs`` (RLlib's vector entry point), a vector env of that many: :func:`make_batched` where
+    the id has a batched backend and ``env_backend`` is "batched", else gymnasium's SyncVectorEnv."""
     from lac_rllib.tasks import safety_gym_compat
 
     cfg = dict(env_config or {})
     env_id = cfg.get("env_id")
     if env_id not in _SAFETY_IDS:
         raise ValueError(f"unknown Safety-Gymnasium task {env_id!r}; known: {sorted(_SAFETY_IDS)}")
+    if "num_envs" in cfg:
+        num_envs = int(cfg.pop("num_envs"))
+        if cfg.get("env_backend", "batched") == "batched" and env_id in _NAV_IDS and supports(*_NAV_IDS[env_id]):
+            return make_batched(env_id, num_envs, cfg.get("max_episode_steps"), bool(cfg.get("light_resets", True)))
+        return gym.vector.SyncVectorEnv([lambda: make_env(cfg) for _ in range(num_envs)])
     safety_gym_compat.apply()
     light_resets.install()
     from safety_gymnasium.utils.registration import make as safety_make
@@ -122,6 +129,22 @@ def make_env(env_config: dict | None = None) -> gym.Env:
         )
         light = bool(cfg.get("light_resets", True)) and cfg.get("render_mode") is None
         return SafetyToGymnasium(inner, light_resets=light)
+
+
+def make_batched(env_id: str, num_envs: int, max_episode_steps: int | None = None,
+                 light_resets: bool = True) -> gym.vector.VectorEnv:
+    """``num_envs`` envs of ``env_id`` stepped as one on the batched backend
+    (lac_rllib/tasks/batched_navigation.py): stock envs that it steps, equal step for step."""
+    from lac_rllib.tasks.batched_navigation import BatchedNavigationEnv
+
+    if env_id not in _NAV_IDS or not supports(*_NAV_IDS[env_id]):
+        raise ValueError(f"{env_id!r} has no batched backend; accepted: the {', '.join(BATCHED_FAMILIES)} tasks "
+                         f"of {', '.join(BATCHED_ROBOTS)}, levels 0-2 (the others run on env_backend: stock)")
+    cfg = {"env_id": env_id, "light_resets": light_resets}
+    if max_episode_steps is not None:
+        cfg["max_episode_steps"] = int(max_episode_steps)
+    horizon = int(max_episode_steps or episode_steps(env_id))
+    return BatchedNavigationEnv([make_env(cfg) for _ in range(int(num_envs))], _family(_NAV_IDS[env_id][1]), horizon)
 
 
 # --------------------------------------------------------------------------- the tasks
@@ -210,6 +233,16 @@ VELOCITY: dict[str, tuple[int, int, str]] = {
 }
 
 
+#: The navigation tasks with a batched backend (lac_rllib/tasks/batched_navigation.py): these robots
+#: on these families, levels 0-2; every other id runs stock.
+BATCHED_FAMILIES, BATCHED_ROBOTS = ("Goal", "Button", "Push"), ("Point", "Car")
+
+
+def supports(robot: str, task: str) -> bool:
+    """Whether ``Safety{robot}{task}-v0`` has a batched backend."""
+    return robot in BATCHED_ROBOTS and _family(task) in BATCHED_FAMILIES and task[-1] in "012"
+
+
 def _family(task: str) -> str:
     return task.rstrip("0123456789")
 
@@ -245,6 +278,7 @@ def _nav(robot: str, task: str) -> TaskSpec:
         family=_family(task),
         step_cost=NAV_STEP_COST[task][list(NAV_ROBOTS).index(robot)],
         episode_steps=episode_steps(env_id),
+        batched=supports(robot, task),
     )
 
 

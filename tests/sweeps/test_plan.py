@@ -310,3 +310,14 @@ def test_a_command_plans_a_list_of_jobs_each_checked_then_run_the_same_way(tmp_p
     assert len(tuned) == 4 and all(isinstance(j, TunedPlan) for j in tuned)
     for job in tuned:
         job.check()  # no search ran yet: every directory is free
+
+
+def test_the_plan_says_which_backend_each_task_steps_on(tmp_path, monkeypatch, capsys):
+    (tmp_path / "b.yaml").write_text("task: [SafetyPointGoal1-v0, SafetyDoggoGoal1-v0]\nalgo: ppo_lag\nbudget: smoke\n"
+                                     "seeds: 1\ngroups:\n  g: {grid: {env_backend: [batched, stock]}}\n")
+    plan = _plan(tmp_path, monkeypatch, "--config", str(tmp_path / "b.yaml"))
+    assert cli.env_backends(plan) == ("SafetyPointGoal1-v0 batched and stock; SafetyDoggoGoal1-v0 stock "
+                                      "(no batched one)")
+    cli.print_plan(plan)
+    assert "env backend: SafetyPointGoal1-v0 batched and stock" in capsys.readouterr().out
+    assert cli.env_backends(_plan(tmp_path, monkeypatch, "--space", "ablation", "--name", "a2")) == ""

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from lac_rllib.tasks import navigation_layer as layer
-from lac_rllib.tasks.batched_navigation import BatchedNavigationEnv, supports
 from lac_rllib.tasks.navigation_equality import compare
+from lac_rllib.tasks.safety_gym import make_batched, supports
 
 IDS = [f"Safety{robot}{family}{level}-v0" for family in ("Goal", "Button", "Push") for robot in ("Point", "Car")
        for level in (0, 1, 2)]
@@ -40,11 +40,11 @@ def test_the_batched_ids_are_goal_button_and_push_of_point_and_car():
            if supports(r, t)]
     assert ids == ["PointGoal1", "PointButton2", "PointPush0", "CarGoal1", "CarButton2", "CarPush0"]
     with pytest.raises(ValueError, match="SafetyDoggoGoal1-v0.*no batched backend"):
-        BatchedNavigationEnv("SafetyDoggoGoal1-v0", 2)
+        make_batched("SafetyDoggoGoal1-v0", 2)
 
 
 def test_autoreset_is_gymnasiums_next_step():
-    env = BatchedNavigationEnv("SafetyPointGoal0-v0", 2, max_episode_steps=3)
+    env = make_batched("SafetyPointGoal0-v0", 2, 3)
     env.reset(seed=1)
     a = np.zeros((2, 2), np.float32)
     for _ in range(2):
@@ -115,7 +115,7 @@ def test_a_box_pushed_into_the_goal_resamples_the_goal_alike(env_id):
     from lac_rllib.tasks.safety_gym import make_env
 
     stock = SyncVectorEnv([lambda: make_env({"env_id": env_id}) for _ in range(2)])
-    fast = BatchedNavigationEnv(env_id, 2)
+    fast = make_batched(env_id, 2)
     stock.reset(seed=4)
     fast.reset(seed=4)
     for side in (stock.envs, fast.envs):
@@ -135,3 +135,11 @@ def test_a_box_pushed_into_the_goal_resamples_the_goal_alike(env_id):
     assert met == 2  # each env met its goal once, then had a new one
     stock.close()
     fast.close()
+
+
+def test_lidars_of_several_groups_in_one_pass_equal_one_lidar_each():
+    ego = np.random.default_rng(0).uniform(-3, 3, (50, 12, 2))
+    for groups in ([slice(0, 3), slice(3, 3), slice(5, 12), slice(3, 5)], [slice(0, 3), slice(5, 12)]):
+        for g, lidar in zip(groups, layer.pseudo_lidars(ego, groups, 16, 3.0, 1.0, True)):
+            alone = layer.pseudo_lidar(ego[:, g], 16, 3.0, 1.0, True) if g.stop > g.start else np.zeros((50, 16))
+            assert np.array_equal(lidar, alone)
