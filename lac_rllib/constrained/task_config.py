@@ -25,6 +25,7 @@ from lac_rllib.constrained.cpus import OneThreadPerEnvRunner, set_runners
 from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
+from lac_rllib.tasks.point_robot import ROBOT_VARIANTS
 from lac_rllib.tasks.registry import ENV_BACKENDS
 
 
@@ -43,6 +44,10 @@ class SafeTaskParams:
     steps its envs: "batched" (one vector env, lac_rllib/tasks/batched_navigation.py, equal to
     Safety-Gymnasium step for step) or "stock" (gymnasium's SyncVectorEnv of stock envs). Every
     other task runs stock whatever this says. Named in the env fingerprint."""
+    robot_variant: str = param("safety_gymnasium", accepts=one_of(ROBOT_VARIANTS))
+    """The Point tasks' robot: Safety-Gymnasium's (its turn a velocity servo) or "safety_gym", the
+    paper's Safety-Gym Point (its turn a torque motor; lac_rllib/tasks/point_robot.py), the rest of
+    the task unchanged. Other robots have one. Named in the env fingerprint of a Point task."""
 
     # --- observation filter ---
     obs_normalization: bool = param(True, accepts=BOOL)
@@ -187,14 +192,22 @@ class SafeTaskConfig:
         return self
 
     def _apply_env_backend(self) -> None:
-        """RLlib's door for a vector env: with the batched backend, the env runners build the env
-        through gymnasium's vector entry point (the task's factory gets ``num_envs``), else as
-        gymnasium's SyncVectorEnv of single envs (RLlib's default)."""
+        """The env fields into the env's config, where the task has them: RLlib's door for a vector
+        env (with the batched backend the env runners build the env through gymnasium's vector
+        entry point, the task's factory given ``num_envs``; else gymnasium's SyncVectorEnv of
+        single envs, RLlib's default) and a Point task's robot."""
         spec = self.task_spec
         batched = bool(spec is not None and spec.batched and self.env_backend == "batched")
         self.gym_env_vectorize_mode = "vector_entry_point" if batched else "sync"
+        config = dict(self.env_config or {})
         if spec is not None and spec.batched:
-            self.env_config = {**dict(self.env_config or {}), "env_backend": self.env_backend}
+            config["env_backend"] = self.env_backend
+        if spec is not None and spec.robot == "Point":
+            config["robot_variant"] = self.robot_variant
+        elif self.robot_variant != "safety_gymnasium":
+            raise ValueError(f"robot_variant={self.robot_variant!r} on {self.task_id}: only the Point tasks have "
+                             "another robot; accepted here: safety_gymnasium")
+        self.env_config = config
 
     def preset_values(self, name: str) -> dict[str, Any]:
         """The field values of the preset ``name`` (an unknown one raises a ValueError listing them)."""
@@ -221,7 +234,7 @@ class SafeTaskConfig:
                 value = tuple(value)
             self.FIELDS.check(name, value)
             setattr(self, name, value)
-        if "env_backend" in own and self.task_id:
+        if ("env_backend" in own or "robot_variant" in own) and self.task_id:
             self._apply_env_backend()
         return self
 

@@ -4,11 +4,12 @@ The same task id is not the same environment across simulator versions (SafePO#2
 against Safety-Gymnasium numbers; omnisafe#127, #311), envs per runner (safety-gymnasium#40: vector
 env counts change what the algorithm sees), cost conventions or observation filters, and the
 bfloat16 kernels some algorithms pick by CPU (lac_rllib/constrained/precision.py) compute
-differently on a CPU without them, and the backend a navigation task steps on (batched or stock:
-equal step for step, yet named, so a claim rests on one). Every sweep trial records its fingerprint (MLflow tag
-``lac.env_fingerprint``, the whole in ``lac.env_fingerprint_json``); reports, the frontier,
-confirmation and the registry of tuned configurations never rank runs whose fingerprints differ
-(sweeps/reports/results.py). Plain data, no Ray.
+differently on a CPU without them, the backend a navigation task steps on (batched or stock:
+equal step for step, yet named, so a claim rests on one), and a Point task's robot. Every sweep
+trial records its fingerprint (MLflow tag ``lac.env_fingerprint``, the whole in
+``lac.env_fingerprint_json``); reports, the frontier, confirmation and the registry of tuned
+configurations never rank runs whose fingerprints differ (sweeps/reports/results.py). Plain data,
+no Ray.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ def fingerprint(task: str, params: dict, num_env_runners: int = 0) -> dict[str, 
             k.endswith("_dtype") and v == "auto" for k, v in params.items()) else None,
         # Only where the task has a batched backend (a key elsewhere would change every other id).
         **({"env_backend": params.get("env_backend") or "batched"} if spec.batched else {}),
+        **({"robot_variant": params.get("robot_variant") or "safety_gymnasium"} if spec.robot == "Point" else {}),
     }
 
 

@@ -73,16 +73,18 @@ def _layouts(envs) -> list:
 
 
 def compare(env_id: str, num_envs: int = 4, vector_steps: int = 500, seed: int = 0,
-            max_episode_steps: int | None = None, batched=None) -> Comparison:
+            max_episode_steps: int | None = None, batched=None, env_config: dict | None = None) -> Comparison:
     """``vector_steps`` steps of ``num_envs`` stock envs and of the batched env (or ``batched``, a
-    vector env built alike, e.g. one with a deliberate error), seeded ``seed``, compared."""
+    vector env built alike, e.g. one with a deliberate error), seeded ``seed``, compared; both
+    built with ``env_config`` (e.g. ``{"robot_variant": "safety_gym"}``)."""
     from gymnasium.vector import SyncVectorEnv
 
     from lac_rllib.tasks.safety_gym import make_batched, make_env
 
-    cfg = {"env_id": env_id} | ({"max_episode_steps": max_episode_steps} if max_episode_steps else {})
+    extra = dict(env_config or {})
+    cfg = {**extra, "env_id": env_id} | ({"max_episode_steps": max_episode_steps} if max_episode_steps else {})
     stock = SyncVectorEnv([lambda: make_env(cfg) for _ in range(num_envs)])
-    fast = batched or make_batched(env_id, num_envs, max_episode_steps)
+    fast = batched or make_batched(env_id, num_envs, max_episode_steps, **extra)
     out = Comparison(env_id, num_envs)
     o1, _ = stock.reset(seed=seed)
     o2, _ = fast.reset(seed=seed)

@@ -65,6 +65,9 @@ class TaskSpec:
     #: ``env_backend: batched``): lac_rllib/tasks/batched_navigation.py. A way to step the same env,
     #: not part of what the task is: left out of a spec's equality (the fingerprint names the backend).
     batched: bool = dataclasses.field(default=False, compare=False)
+    #: A navigation task's robot (``Point``, ``Car``, ...; empty for others): a Point task also runs
+    #: Safety-Gym's Point (``robot_variant``, lac_rllib/tasks/point_robot.py).
+    robot: str = dataclasses.field(default="", compare=False)
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""

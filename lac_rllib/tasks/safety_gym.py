@@ -34,8 +34,9 @@ tests/tasks/test_safety_gym.py checks them against the envs).
 env_config keys understood by :func:`make_env`: ``env_id`` (set by the task's kwargs),
 ``max_episode_steps`` (default: the task's, :func:`episode_steps`), ``render_mode`` (default
 None), ``light_resets`` (default True: navigation resets skip the render-only skybox when there
-is no render_mode, lac_rllib.tasks.light_resets). Other keys (e.g. RLlib's ``num_envs``) are
-ignored.
+is no render_mode, lac_rllib.tasks.light_resets), ``robot_variant`` (a Point task's robot:
+lac_rllib/tasks/point_robot.py), and with ``num_envs`` (RLlib's vector entry point) ``env_backend``
+(:func:`make_batched`, or gymnasium's SyncVectorEnv of stock envs). Other keys are ignored.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lac_rllib.tasks import light_resets
+from lac_rllib.tasks import light_resets, point_robot
 from lac_rllib.tasks.registry import MUJOCO, SAFETY_GYM, TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.safety_gym:make_env"
@@ -109,7 +110,7 @@ def make_env(env_config: dict | None = None) -> gym.Env | gym.vector.VectorEnv:
     if "num_envs" in cfg:
         num_envs = int(cfg.pop("num_envs"))
         if cfg.get("env_backend", "batched") == "batched" and env_id in _NAV_IDS and supports(*_NAV_IDS[env_id]):
-            return make_batched(env_id, num_envs, cfg.get("max_episode_steps"), bool(cfg.get("light_resets", True)))
+            return make_batched(env_id, num_envs, **{k: v for k, v in cfg.items() if k != "env_id"})
         return gym.vector.SyncVectorEnv([lambda: make_env(cfg) for _ in range(num_envs)])
     safety_gym_compat.apply()
     light_resets.install()
@@ -128,19 +129,27 @@ def make_env(env_config: dict | None = None) -> gym.Env | gym.vector.VectorEnv:
             **kwargs,
         )
         light = bool(cfg.get("light_resets", True)) and cfg.get("render_mode") is None
-        return SafetyToGymnasium(inner, light_resets=light)
+        env = SafetyToGymnasium(inner, light_resets=light)
+    variant = cfg.get("robot_variant", "safety_gymnasium")
+    if variant != "safety_gymnasium" and (env_id not in _NAV_IDS or _NAV_IDS[env_id][0] != "Point"):
+        raise ValueError(f"robot_variant={variant!r} on {env_id}: only the Point tasks have another robot; "
+                         "accepted here: safety_gymnasium")
+    point_robot.apply(env, variant)
+    return env
 
 
 def make_batched(env_id: str, num_envs: int, max_episode_steps: int | None = None,
-                 light_resets: bool = True) -> gym.vector.VectorEnv:
+                 **env_config) -> gym.vector.VectorEnv:
     """``num_envs`` envs of ``env_id`` stepped as one on the batched backend
-    (lac_rllib/tasks/batched_navigation.py): stock envs that it steps, equal step for step."""
+    (lac_rllib/tasks/batched_navigation.py): stock envs (each :func:`make_env` of ``env_config``)
+    that it steps, equal step for step."""
     from lac_rllib.tasks.batched_navigation import BatchedNavigationEnv
 
     if env_id not in _NAV_IDS or not supports(*_NAV_IDS[env_id]):
         raise ValueError(f"{env_id!r} has no batched backend; accepted: the {', '.join(BATCHED_FAMILIES)} tasks "
                          f"of {', '.join(BATCHED_ROBOTS)}, levels 0-2 (the others run on env_backend: stock)")
-    cfg = {"env_id": env_id, "light_resets": light_resets}
+    cfg = {**env_config, "env_id": env_id}
+    cfg.pop("env_backend", None)
     if max_episode_steps is not None:
         cfg["max_episode_steps"] = int(max_episode_steps)
     horizon = int(max_episode_steps or episode_steps(env_id))
@@ -279,6 +288,7 @@ def _nav(robot: str, task: str) -> TaskSpec:
         step_cost=NAV_STEP_COST[task][list(NAV_ROBOTS).index(robot)],
         episode_steps=episode_steps(env_id),
         batched=supports(robot, task),
+        robot=robot,
     )
 
 
