@@ -71,6 +71,9 @@ class _Layout:
 
     groups: dict  #: body group → slice of ``_Sim.bodies`` (the agent is row 0)
     columns: list  #: per observation key in order: ("raw", raw slice) | ("quat", k) | ("lidar", group)
+    at: list  #: per observation key: its slice of the flat observation
+    seen: list  #: the lidar groups in the observation's order
+    seen_slices: list  #: their slices of the bodies after the agent's
 
 
 class BatchedNavigationEnv(VectorEnv):
@@ -214,27 +217,27 @@ class BatchedNavigationEnv(VectorEnv):
 
     def _observe(self, sims, xpos) -> np.ndarray:
         """``BaseTask.obs`` flattened: the sensors, then each lidar, in the observation's order (the
-        buttons' lidar reads 0 while their timer runs: ``ButtonLevel0.obs``)."""
-        c = self._task.lidar_conf
+        buttons' lidar reads 0 while their timer runs: ``ButtonLevel0.obs``), each block written
+        into the float32 observation as the stock wrapper casts it."""
+        c, layout = self._task.lidar_conf, self._layout
+        obs = np.empty((len(sims), self.single_observation_space.shape[0]), self.observation_space.dtype)
         mat = np.stack([s.xmat[s.bodies[0]] for s in sims]).reshape(-1, 3, 3)
         raw = np.stack([s.sensordata[s.raw] for s in sims])
         # Every lidar at once: one egocentric transform and one pass over all the objects seen.
-        seen = [what for kind, what in self._layout.columns if kind == "lidar"]
         ego = layer.ego_xy(xpos[:, 1:], xpos[:, 0], mat)
-        shifted = [slice(self._layout.groups[g].start - 1, self._layout.groups[g].stop - 1) for g in seen]
-        lidars = dict(zip(seen, layer.pseudo_lidars(ego, shifted, c.num_bins, c.max_dist, c.exp_gain, c.alias)))
-        parts = []
-        for kind, what in self._layout.columns:
+        lidars = dict(zip(layout.seen, layer.pseudo_lidars(ego, layout.seen_slices, c.num_bins, c.max_dist,
+                                                           c.exp_gain, c.alias)))
+        for (kind, what), at in zip(layout.columns, layout.at):
             if kind == "raw":
-                parts.append(raw[:, what])
+                obs[:, at] = raw[:, what]
             elif kind == "quat":
-                parts.append(np.stack([_quat2mat(s.sensordata[s.quats[what]]) for s in sims]))
+                obs[:, at] = np.stack([_quat2mat(s.sensordata[s.quats[what]]) for s in sims])
             else:
                 lidar = lidars[what]
                 if what == "buttons":
                     lidar[[s.task.buttons.timer != 0 for s in sims]] = 0.0
-                parts.append(lidar)
-        return np.concatenate(parts, axis=1).astype(self.observation_space.dtype)
+                obs[:, at] = lidar
+        return obs
 
     def close_extras(self, **kwargs) -> None:
         for env in getattr(self, "envs", ()):  # none where __init__ refused the id
@@ -257,18 +260,22 @@ def _layout(task) -> _Layout:
             k = len(_bodies(ob))
             groups[ob.name] = slice(at, at + k)
             at += k
-    columns, raw_at = [], 0
+    columns, at, raw_at, obs_at = [], [], 0, 0
     quats = task.agent.sensor_info.ballquat_names
     for key, space in task.obs_info.obs_space_dict.items():
+        dim = int(np.prod(space.shape))
+        at.append(slice(obs_at, obs_at + dim))
+        obs_at += dim
         if key.endswith("_lidar"):
             columns.append(("lidar", key[: -len("_lidar")]))
         elif key in quats:
             columns.append(("quat", quats.index(key)))
         else:
-            dim = int(np.prod(space.shape))
             columns.append(("raw", slice(raw_at, raw_at + dim)))
             raw_at += dim
-    return _Layout(groups=groups, columns=columns)
+    seen = [what for kind, what in columns if kind == "lidar"]
+    return _Layout(groups=groups, columns=columns, at=at, seen=seen,
+                   seen_slices=[slice(groups[g].start - 1, groups[g].stop - 1) for g in seen])
 
 
 def _attach(task, layout: _Layout) -> _Sim:

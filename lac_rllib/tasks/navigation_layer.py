@@ -18,6 +18,8 @@ each choice against the stock expression on random inputs):
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 
@@ -42,9 +44,10 @@ def pseudo_lidar(ego: np.ndarray, num_bins: int, max_dist: float | None, exp_gai
 def pseudo_lidars(ego: np.ndarray, groups: list[slice], num_bins: int, max_dist: float | None, exp_gain: float,
                   alias: bool) -> list[np.ndarray]:
     """One (N, num_bins) lidar per group of objects (``groups``: slices of ``ego``'s K objects),
-    every object's distance, angle and bin computed in one pass. A bin is the max over its
-    objects' readings (exact in any order), taken over a one-hot (N, K, bins) array rather than
-    written object by object."""
+    every object's distance, angle and bin computed in one pass. A bin is the max over the readings
+    its objects write there (its own bin's and, aliased, its neighbours'): exact in any order, so
+    taken over one one-hot array (N, readings, bins) with the readings of each group side by side
+    (one ``reduceat`` at the groups' starts) rather than written object by object."""
     z = ego[..., 0] + 1j * ego[..., 1]
     dist = np.abs(z)
     angle = np.angle(z) % (np.pi * 2)
@@ -54,33 +57,29 @@ def pseudo_lidars(ego: np.ndarray, groups: list[slice], num_bins: int, max_dist:
         sensor = np.exp(-exp_gain * dist)
     else:
         sensor = np.maximum(0, max_dist - dist) / max_dist
-    slots = np.arange(num_bins)
-    reads = [(bins, sensor)]
+    where, value = [bins], [sensor]
     if alias:
         frac = (angle - bin_size * bins) / bin_size
-        reads += [((bins + 1) % num_bins, frac * sensor), ((bins - 1) % num_bins, (1 - frac) * sensor)]
-    n = ego.shape[0]
+        where += [(bins + 1) % num_bins, (bins - 1) % num_bins]
+        value += [frac * sensor, (1 - frac) * sensor]
+    n, k, r = ego.shape[0], ego.shape[1], len(where)
     filled = [g for g in groups if g.stop > g.start]
-    obs = np.zeros((n, len(filled), num_bins))
-    order = sorted(filled, key=lambda g: g.start)
-    adjacent = all(a.stop == b.start for a, b in zip(order, order[1:]))
-    for b, value in reads:
-        one_hot = np.where(b[..., None] == slots, value[..., None], 0.0)  # (N, K, bins)
-        if filled and adjacent:  # groups back to back: one reduceat at their starts
-            span = one_hot[:, order[0].start:order[-1].stop]
-            best = np.maximum.reduceat(span, [g.start - order[0].start for g in order], axis=1)
-            np.maximum(obs, best[:, [order.index(g) for g in filled]], out=obs)
-        else:
-            for k, g in enumerate(filled):
-                np.maximum(obs[:, k], one_hot[:, g].max(axis=1), out=obs[:, k])
-    out, k = [], 0
-    for g in groups:
-        if g.stop > g.start:
-            out.append(obs[:, k])
-            k += 1
-        else:
-            out.append(np.zeros((n, num_bins)))
-    return out
+    out = {}
+    if filled:
+        columns, starts = _gather(k, r, tuple((g.start, g.stop) for g in filled))
+        b, v = np.concatenate(where, axis=1)[:, columns], np.concatenate(value, axis=1)[:, columns]
+        one_hot = np.where(b[..., None] == np.arange(num_bins), v[..., None], 0.0)
+        best = np.maximum.reduceat(one_hot, starts, axis=1)
+        out = {id(g): best[:, i] for i, g in enumerate(filled)}
+    return [out[id(g)] if id(g) in out else np.zeros((n, num_bins)) for g in groups]
+
+
+@functools.lru_cache(maxsize=64)
+def _gather(k: int, r: int, spans: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """Reading j of object i sits at column j·K + i of the readings side by side: each group's
+    columns gathered together, and where each group starts (the same every step of a task)."""
+    columns = np.concatenate([np.arange(a, b) + j * k for a, b in spans for j in range(r)])
+    return columns, np.cumsum([0] + [(b - a) * r for a, b in spans[:-1]])
 
 
 def dist_xy(points: np.ndarray, agent_pos: np.ndarray) -> np.ndarray:
@@ -97,7 +96,6 @@ def hazard_violation(dist: np.ndarray, size: float) -> np.ndarray:
 
 
 def clip_reward(reward: np.ndarray, clip: float | None) -> np.ndarray:
-    """``Builder._reward``'s last resort: a reward outside (−clip, clip) is clipped."""
-    if not clip:
-        return reward
-    return np.where((-clip < reward) & (reward < clip), reward, np.clip(reward, -clip, clip))
+    """``Builder._reward``'s last resort: a reward outside (−clip, clip) is clipped (within, and at
+    ±clip itself, clipping returns the same value, so one ``np.clip`` is the stock rule)."""
+    return np.clip(reward, -clip, clip) if clip else reward
