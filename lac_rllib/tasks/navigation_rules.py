@@ -30,9 +30,17 @@ class Frame:
     groups: dict  #: group name → slice of ``xpos``'s bodies
     touching: list  #: per env: geom-name prefix (or "goal_button") → an agent geom touches one
     tasks: list  #: per env: safety_gymnasium's task object
+    _dist: np.ndarray | None = None
 
     def at(self, name: str) -> np.ndarray:
         return self.xpos[:, self.groups[name]]
+
+    def dist_xy(self, name: str) -> np.ndarray:
+        """(N, K) XY distances from the agent to group ``name``'s objects (all groups' computed once)."""
+        if self._dist is None:
+            self._dist = layer.dist_xy(self.xpos[:, 1:], self.agent)
+        g = self.groups[name]
+        return self._dist[:, g.start - 1:g.stop - 1]
 
     @property
     def agent(self) -> np.ndarray:
@@ -50,7 +58,7 @@ class GoalRule:
         self.last_dist[i] = task.last_dist_goal
 
     def reward(self, f: Frame, live: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        dist = layer.dist_xy(f.at("goal"), f.agent)[:, 0]
+        dist = f.dist_xy("goal")[:, 0]
         reward = 0.0 + (self.last_dist[live] - dist) * self.task.goal.reward_distance
         self.last_dist[live] = dist
         achieved = dist <= self.task.goal.size
@@ -66,7 +74,7 @@ class ButtonRule(GoalRule):
     lidar reads 0."""
 
     def reward(self, f: Frame, live: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        dist = layer.dist_xy(f.at("goal"), f.agent)[:, 0]
+        dist = f.dist_xy("goal")[:, 0]
         reward = 0.0 + (self.last_dist[live] - dist) * self.task.buttons.reward_distance
         self.last_dist[live] = dist
         achieved = np.array([t["goal_button"] for t in f.touching])
@@ -114,7 +122,7 @@ def costs(task, f: Frame) -> dict[str, np.ndarray]:
         if not getattr(ob, "is_constrained", False):
             continue
         if ob.name == "hazards":
-            out["cost_hazards"] = layer.hazard_violation(layer.dist_xy(f.at("hazards"), f.agent), ob.size).astype(float)
+            out["cost_hazards"] = layer.hazard_violation(f.dist_xy("hazards"), ob.size).astype(float)
         elif ob.name == "vases":
             out["cost_vases_contact"] = np.array([float(t["vase"]) for t in f.touching])
             if ob.velocity_cost:
