@@ -58,9 +58,26 @@ def test_the_readmes_default_ablation_figures_are_the_verdicts_of_its_trials():
     assert ties == ["NI 20", "PR 0.5", "VT 20", "VT 30"], ties  # the README names these as tied
 
 
-def test_the_committed_partial_ladder_is_rendered_from_its_trials(tmp_path):
-    folder = DOCS / "ladder-pointhazard" / "rerun-in-progress"
-    rendered.render_ladder(folder, tmp_path)
+def test_the_committed_ladder_is_rendered_from_its_trials(tmp_path):
+    folder = DOCS / "ladder-pointhazard"
+    rendered.render(folder, tmp_path)
     assert (tmp_path / "ladder.md").read_text() == (folder / "ladder.md").read_text()
     for name in ("ladder.csv", "frontier_points.csv"):
         _same_csv(tmp_path / name, folder / name)
+
+
+def test_the_ladders_verdicts_quote_only_what_its_data_says():
+    """Every number in docs/ladder-pointhazard/README.md's verdicts is printed by ladder.md, or is a
+    frontier point's or a trial's figure rounded (to 1 or 2 decimals)."""
+    import re
+
+    folder = DOCS / "ladder-pointhazard"
+    text = (folder / "README.md").read_text().replace("−", "-")
+    verdicts = text.split("## Verdicts", 1)[1].split("\n## ", 1)[0]
+    allowed = set(re.findall(r"-?\d+(?:\.\d+)?", (folder / "ladder.md").read_text()))
+    points, trials = pd.read_csv(folder / "frontier_points.csv"), pd.read_csv(folder / "trials.csv")
+    for x in [*points["return_mean"], *points["cost_mean"], *trials["episode_cost"], *trials["episode_return"]]:
+        allowed |= {f"{x:.1f}", f"{x:.2f}"}
+    quoted = re.findall(r"-?\d+(?:\.\d+)?", verdicts)
+    assert len(quoted) > 50
+    assert not [q for q in quoted if q not in allowed]
