@@ -12,20 +12,23 @@ from lac_rllib.tasks.safety_gym import make_batched, supports
 
 IDS = [f"Safety{robot}{family}{level}-v0" for family in ("Goal", "Button", "Push") for robot in ("Point", "Car")
        for level in (0, 1, 2)]
-#: Ids whose seeded short stream meets no cost (their costs are compared on the longer streams of
-#: benchmarks/batched_equality.py).
-QUIET = {"SafetyCarButton1-v0", "SafetyCarButton2-v0", "SafetyPointPush1-v0", "SafetyCarPush1-v0", "SafetyCarPush2-v0"}
 
 
 @pytest.mark.parametrize("env_id", IDS)
-def test_a_short_stream_equals_stock_with_resets_goals_and_costs(env_id):
+def test_a_short_stream_equals_stock_across_resets(env_id):
+    c = compare(env_id, num_envs=2, vector_steps=130, seed=0, max_episode_steps=40)
+    assert c.identical, c.line()
+    assert c.episodes == 6 and c.steps == 2 * 130 - 6  # ends at steps 40, 81 and 122, each then a reset step
+
+
+@pytest.mark.parametrize("env_id", ["SafetyPointGoal1-v0", "SafetyPointGoal2-v0", "SafetyPointButton1-v0",
+                                    "SafetyCarGoal2-v0"])
+def test_goals_met_and_costs_paid_alike(env_id):
+    """Longer streams where the goal is met and resampled (Point's actions steer to it) and the
+    constraints are violated: hazards, vases touched and moving, gremlins, wrong buttons."""
     c = compare(env_id, num_envs=3, vector_steps=300, seed=0, max_episode_steps=100)
     assert c.identical, c.line()
-    assert c.episodes == 6 and c.steps == 3 * 300 - 6  # ends at steps 100 and 201, each then a reset step
-    if "Point" in env_id and "Push" not in env_id:
-        assert c.goals > 0, c.line()  # the goal's resampling ran (Push's: the test below)
-    if not env_id.endswith("0-v0") and env_id not in QUIET:
-        assert c.cost_steps > 0, c.line()  # a constraint was violated on both sides alike
+    assert c.cost_steps > 0 and (c.goals > 0 or "Car" in env_id), c.line()
 
 
 def test_an_error_of_one_ulp_in_a_distance_is_caught(monkeypatch):
