@@ -98,6 +98,7 @@ class BatchedNavigationEnv(VectorEnv):
         self._rule = rules.RULES[family](task, self.num_envs)
         self._horizon = min(task.num_steps, int(horizon))
         self._layout = _layout(task)
+        self._constrained, self._contacts = rules.constrained(task), rules.needs_contacts(task)
         self._sims: list[_Sim | None] = [None] * self.num_envs
         self._steps = np.zeros(self.num_envs, np.int64)
         self._autoreset = np.zeros(self.num_envs, bool)
@@ -170,8 +171,9 @@ class BatchedNavigationEnv(VectorEnv):
             forward(m, d)
 
     def _frame(self, sims) -> rules.Frame:
+        touching = [_touching(s) for s in sims] if self._contacts else [{}] * len(sims)
         return rules.Frame(xpos=np.stack([s.xpos[s.bodies] for s in sims]), groups=self._layout.groups,
-                           touching=[_touching(s) for s in sims], tasks=[s.task for s in sims])
+                           touching=touching, tasks=[s.task for s in sims])
 
     def _step_live(self, live, actions, obs, rewards, terminated, truncated, infos) -> dict:
         sims = [self._sims[i] for i in live]
@@ -180,7 +182,7 @@ class BatchedNavigationEnv(VectorEnv):
         # Builder.step's order: the reward, the costs, specific_step, then a met goal resampled.
         reward, achieved = self._rule.reward(frame, live)
         rewards[live] = layer.clip_reward(reward, self._task.reward_conf.reward_clip)
-        costs = rules.costs(self._task, frame)
+        costs = rules.costs(self._constrained, frame)
         for key, value in costs.items():  # the infos SyncVectorEnv would gather, key by key
             infos = self._add_column(infos, key, value, live)
         infos = self._add_column(infos, "cost", costs["cost_sum"], live)

@@ -12,8 +12,8 @@ each choice against the stock expression on random inputs):
   matmul kernel, not a left-to-right sum);
 - a lidar distance is ``np.abs`` of the complex number ``x + iy``, as ``_obs_lidar_pseudo`` does;
   ``np.hypot(x, y)`` differs by one ulp on some inputs;
-- an XY distance is ``sqrt(sum(square(dx, dy)))`` (``BaseAgent.dist_xy``): two terms, so the
-  sum's order is fixed.
+- an XY distance is ``sqrt(dx² + dy²)``, ``BaseAgent.dist_xy``'s ``sqrt(sum(square(d)))`` written
+  out: numpy sums two terms as ``0 + dx² + dy²``, which rounds as ``dx² + dy²``.
 """
 
 from __future__ import annotations
@@ -83,16 +83,18 @@ def _gather(k: int, r: int, spans: tuple) -> tuple[np.ndarray, np.ndarray]:
 
 
 def dist_xy(points: np.ndarray, agent_pos: np.ndarray) -> np.ndarray:
-    """(N, K) XY distances from the agent (N, 3) to ``points`` (N, K, 2 or 3): ``BaseAgent.dist_xy``."""
-    d = points[..., :2] - agent_pos[:, None, :2]
-    return np.sqrt(np.sum(np.square(d), axis=-1))
+    """(N, K) XY distances from the agent (N, 3) to ``points`` (N, K, 2 or 3): ``BaseAgent.dist_xy``,
+    ``sqrt(sum(square(d)))``; a sum of two squares is ``dx² + dy²`` in any form, written out."""
+    dx = points[..., 0] - agent_pos[:, None, 0]
+    dy = points[..., 1] - agent_pos[:, None, 1]
+    return np.sqrt(dx * dx + dy * dy)
 
 
 def hazard_violation(dist: np.ndarray, size: float) -> np.ndarray:
     """(N,) whether any hazard costs this step: ``Hazards.cal_cost`` adds ``cost · (size − dist)``
     for each hazard with ``dist <= size``, and the indicator (``constrain_indicator``) is that sum
     > 0, i.e. some ``dist < size``."""
-    return np.any(size - dist > 0, axis=-1) if dist.shape[-1] else np.zeros(dist.shape[0], bool)
+    return (size - dist > 0).any(axis=-1)
 
 
 def clip_reward(reward: np.ndarray, clip: float | None) -> np.ndarray:

@@ -113,14 +113,25 @@ class PushRule(GoalRule):
 RULES = {"Goal": GoalRule, "Button": ButtonRule, "Push": PushRule}
 
 
-def costs(task, f: Frame) -> dict[str, np.ndarray]:
-    """``BaseTask.calculate_cost`` under ``constrain_indicator``: each constrained obstacle's
-    ``cost_*`` (1.0 where it costs) in the obstacles' order, and ``cost_sum``. The buttons' key is
-    there only for the envs whose timer is 0 (NaN elsewhere: the env has no such key)."""
+def constrained(task) -> list:
+    """The task's constrained obstacles, in ``calculate_cost``'s order (read once: the task's
+    ``_obstacles`` builds its list at every access)."""
+    return [ob for ob in task._obstacles if getattr(ob, "is_constrained", False)]
+
+
+def needs_contacts(task) -> bool:
+    """Whether the task scores anything by contact (a constrained contact cost, the Button goal)."""
+    contact_cost = any(ob.name in CONTACT_COSTS for ob in constrained(task))
+    return contact_cost or getattr(task, "buttons", None) is not None
+
+
+def costs(obstacles: list, f: Frame) -> dict[str, np.ndarray]:
+    """``BaseTask.calculate_cost`` under ``constrain_indicator`` for the task's constrained
+    ``obstacles`` (:func:`constrained`): each one's ``cost_*`` (1.0 where it costs) in their order,
+    and ``cost_sum``. The buttons' key is there only for the envs whose timer is 0 (NaN elsewhere:
+    the env has no such key)."""
     out = {}
-    for ob in task._obstacles:
-        if not getattr(ob, "is_constrained", False):
-            continue
+    for ob in obstacles:
         if ob.name == "hazards":
             out["cost_hazards"] = layer.hazard_violation(f.dist_xy("hazards"), ob.size).astype(float)
         elif ob.name == "vases":
