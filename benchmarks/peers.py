@@ -4,7 +4,7 @@ epoch (PPO-Lag, TRPO-Lag, CPO, PCPO, FOCOPS, CUP, P3O) and per 1,000 updates (SA
     python benchmarks/peers.py --omnisafe-python OMNISAFE_VENV/bin/python            # all eight, 2 rounds
     python benchmarks/peers.py --omnisafe-python ... --algos ppo_lag,cpo --rounds 1
 
-OmniSafe runs in a venv of its own (benchmarks/golden/omnisafe_venv.sh; ../shared/omnisafe-install.md),
+OmniSafe runs in a venv of its own (benchmarks/golden/omnisafe_venv.sh; docs/golden.md),
 never imported here: each side runs in a fresh process of its own venv (this file with ``--side``),
 ours first then theirs, per algorithm and round, each pinned to one core (``taskset``) with one
 torch thread, on SafetyPointGoal1-v0 at each side's defaults for it:
@@ -33,15 +33,26 @@ import sys
 import time
 
 TASK = "SafetyPointGoal1-v0"
-ALGOS = ("ppo_lag", "trpo_lag", "cpo", "pcpo", "focops", "cup", "p3o", "sac_lag")
-OMNISAFE = {"ppo_lag": "PPOLag", "trpo_lag": "TRPOLag", "cpo": "CPO", "pcpo": "PCPO", "focops": "FOCOPS",
-            "cup": "CUP", "p3o": "P3O", "sac_lag": "SACLag"}
 EPOCH = 20_000  # on-policy env steps per epoch, both sides
-SAC_EPOCH = 2_000  # OmniSafe SAC-Lag's steps (and updates) per epoch
+SAC_EPOCH = 2_000  # an off-policy epoch: OmniSafe's steps (and updates) per epoch, ours per iteration
 
 
-def theirs(algo: str) -> dict:
-    """OmniSafe's second epoch (run under its venv)."""
+def peers() -> dict[str, str]:
+    """Each algorithm of the registry that OmniSafe implements → OmniSafe's name for it."""
+    from lac_rllib.algorithms.registry import ALGOS, algo_config
+
+    return {a: algo_config(a).OMNISAFE_NAME for a in ALGOS if algo_config(a).OMNISAFE_NAME}
+
+
+def off_policy(algo: str) -> bool:
+    """Measured per 1,000 updates: an algorithm that updates from a replay buffer."""
+    from lac_rllib.algorithms.registry import algo_config
+
+    return "random_env_steps" in algo_config(algo).FIELDS.names
+
+
+def theirs(name: str, sac: bool) -> dict:
+    """OmniSafe's ``name``'s second epoch (run under its venv; ``sac``: an off-policy one)."""
     import tempfile
 
     import omnisafe
@@ -55,14 +66,13 @@ def theirs(algo: str) -> dict:
         return original(self)
 
     Logger.dump_tabular = dump
-    sac = algo == "sac_lag"
     epoch = SAC_EPOCH if sac else EPOCH
     algo_cfgs = {"steps_per_epoch": epoch} | ({"start_learning_steps": SAC_EPOCH} if sac else {})
     cfgs = {"seed": 0, "train_cfgs": {"total_steps": 2 * epoch, "vector_env_nums": 1, "parallel": 1,
                                       "torch_threads": 1, "device": "cpu"},
             "algo_cfgs": algo_cfgs,
             "logger_cfgs": {"use_wandb": False, "use_tensorboard": False, "log_dir": tempfile.mkdtemp()}}
-    omnisafe.Agent(OMNISAFE[algo], TASK, custom_cfgs=cfgs).learn()
+    omnisafe.Agent(name, TASK, custom_cfgs=cfgs).learn()
     cpu = dumps[1] - dumps[0]
     return {"cpu_s": cpu, "per": (cpu / (SAC_EPOCH / 1000)) if sac else cpu * EPOCH / epoch}
 
@@ -76,8 +86,8 @@ def ours(algo: str) -> dict:
 
     torch.set_num_threads(1)
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
-    # SAC-Lag: its random warm-up cut to the first iteration, as OmniSafe's is to its first epoch.
-    sets = {"random_env_steps": SAC_EPOCH} if algo == "sac_lag" else {}
+    # Off-policy: its random warm-up cut to the first iteration, as OmniSafe's is to its first epoch.
+    sets = {"random_env_steps": SAC_EPOCH} if off_policy(algo) else {}
     config = build_config(algo, TASK, 0, sets, timesteps=10 * EPOCH)
     trainer = config.build_algo()
     try:
@@ -88,7 +98,7 @@ def ours(algo: str) -> dict:
     finally:
         trainer.stop()
         ray.shutdown()
-    if algo == "sac_lag":
+    if off_policy(algo):
         updates = int(config.updates_per_iteration)
         return {"cpu_s": cpu, "per": cpu / (updates / 1000), "updates": updates}
     steps = int(config.train_batch_size_per_learner)
@@ -96,7 +106,9 @@ def ours(algo: str) -> dict:
 
 
 def _run(python: str, side: str, algo: str, core: int) -> dict:
-    cmd = ["taskset", "-c", str(core), python, os.path.abspath(__file__), "--side", side, "--algo", algo]
+    what = ["--algo", algo] if side == "ours" else ["--omnisafe-name", peers()[algo]] + (
+        ["--off-policy"] if off_policy(algo) else [])
+    cmd = ["taskset", "-c", str(core), python, os.path.abspath(__file__), "--side", side, *what]
     out = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
     lines = [ln for ln in out.stdout.splitlines() if ln.startswith("{")]
     if out.returncode or not lines:
@@ -107,19 +119,23 @@ def _run(python: str, side: str, algo: str, core: int) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--omnisafe-python", help="OmniSafe's venv's python (benchmarks/golden/omnisafe_venv.sh)")
-    p.add_argument("--algos", default=",".join(ALGOS))
+    p.add_argument("--algos", default=None, help="default: every algorithm OmniSafe implements")
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--core", type=int, default=0, help="the core both sides are pinned to")
     p.add_argument("--side", choices=("ours", "theirs"), help=argparse.SUPPRESS)
     p.add_argument("--algo", help=argparse.SUPPRESS)
+    p.add_argument("--omnisafe-name", help=argparse.SUPPRESS)
+    p.add_argument("--off-policy", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.side:  # one measurement, in the side's own venv
-        print(json.dumps(ours(args.algo) if args.side == "ours" else theirs(args.algo)), flush=True)
+        result = ours(args.algo) if args.side == "ours" else theirs(args.omnisafe_name, args.off_policy)
+        print(json.dumps(result), flush=True)
         return 0
-    algos = args.algos.split(",")
-    bad = [a for a in algos if a not in ALGOS]
+    known = peers()
+    algos = args.algos.split(",") if args.algos else list(known)
+    bad = [a for a in algos if a not in known]
     if bad or not args.omnisafe_python:
-        p.error(f"--algos {','.join(bad)}: accepted: {','.join(ALGOS)}" if bad else "--omnisafe-python is required")
+        p.error(f"--algos {','.join(bad)}: accepted: {','.join(known)}" if bad else "--omnisafe-python is required")
     cpu = subprocess.run(["sh", "-c", "lscpu | grep 'Model name'"], capture_output=True, text=True).stdout
     print(f"CPU: {cpu.split(':')[-1].strip()}; {TASK}; {args.rounds} rounds, ours then theirs, core {args.core}\n")
     print("| algorithm | unit | ours (CPU s) | OmniSafe (CPU s) | ours / theirs |\n|---|---|---|---|---|")
@@ -128,7 +144,7 @@ def main(argv=None) -> int:
         for _ in range(args.rounds):
             mine.append(_run(sys.executable, "ours", algo, args.core)["per"])
             theirs_.append(_run(args.omnisafe_python, "theirs", algo, args.core)["per"])
-        unit = "1,000 updates" if algo == "sac_lag" else "20k-step epoch"
+        unit = "1,000 updates" if off_policy(algo) else "20k-step epoch"
         a, b = min(mine), min(theirs_)
         print(f"| {algo} | {unit} | {' / '.join(f'{x:.1f}' for x in mine)} | "
               f"{' / '.join(f'{x:.1f}' for x in theirs_)} | {a / b:.2f} (best of each) |", flush=True)

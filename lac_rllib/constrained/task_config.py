@@ -94,6 +94,9 @@ class SafeTaskConfig:
     ALGO: str = ""
     #: What ``lac-eval --actions`` accepts for its policies (lac_rllib/evaluation.py ACTION_MODES).
     ACTIONS: tuple[str, ...] = ("generator",)
+    #: The algorithm's name in OmniSafe 0.5.0, where OmniSafe implements it ("" otherwise): the peer
+    #: benchmarks/peers.py times it against.
+    OMNISAFE_NAME: str = ""
     #: Fields that set how fast a run goes, not what it learns: a resumed run may change them.
     SPEED_FIELDS: frozenset = frozenset()
     #: The fields a search tunes by default (``search: default``, a tuned comparison's ``tune:``):

@@ -81,6 +81,7 @@ class CPOConfig(TrustRegionConfig):
     """Config for :class:`lac_rllib.algorithms.cpo.algorithm.CPO`; fields: :class:`CPOParams`."""
 
     ALGO = "cpo"
+    OMNISAFE_NAME = "CPO"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = CPOParams, fields.FieldSet(CPOParams, "CPO"), PRESETS
     SEARCH_SPACE = {
         "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),

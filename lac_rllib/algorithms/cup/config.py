@@ -65,6 +65,7 @@ class CUPConfig(PPOLagConfig):
     """Config for :class:`lac_rllib.algorithms.cup.algorithm.CUP`; fields: :class:`CUPParams`."""
 
     ALGO = "cup"
+    OMNISAFE_NAME = "CUP"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = CUPParams, fields.FieldSet(CUPParams, "CUP"), PRESETS
     SEARCH_SPACE = {
         "lr": lr(POLICY_LR),

@@ -89,6 +89,7 @@ class FOCOPSConfig(PPOLagConfig):
     """Config for :class:`lac_rllib.algorithms.focops.algorithm.FOCOPS`; fields: :class:`FOCOPSParams`."""
 
     ALGO = "focops"
+    OMNISAFE_NAME = "FOCOPS"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = FOCOPSParams, fields.FieldSet(FOCOPSParams, "FOCOPS"), PRESETS
     SEARCH_SPACE = {
         "lr": lr(POLICY_LR),

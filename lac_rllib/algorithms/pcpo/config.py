@@ -60,6 +60,7 @@ class PCPOConfig(CPOConfig):
     """Config for :class:`lac_rllib.algorithms.pcpo.algorithm.PCPO`; fields: :class:`PCPOParams`."""
 
     ALGO = "pcpo"
+    OMNISAFE_NAME = "PCPO"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = PCPOParams, fields.FieldSet(PCPOParams, "PCPO"), PRESETS
     SEARCH_SPACE = {
         "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),

@@ -60,6 +60,7 @@ class PPOLagConfig(OnPolicyConfig):
     """
 
     ALGO = "ppo_lag"
+    OMNISAFE_NAME = "PPOLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = PPOLagParams, fields.FieldSet(PPOLagParams, "PPO-Lag"), PRESETS
     SEARCH_SPACE = {
         "lr": lr(POLICY_LR),

@@ -195,6 +195,7 @@ class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
     task's preset; explicit ``training(...)`` values win over the preset."""
 
     ALGO = "sac_lag"
+    OMNISAFE_NAME = "SACLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = SACLagParams, FIELDS, PRESETS
     SEARCH_SPACE = {
         "actor_lr": lr("[O] SACLag.yaml's actor lr spans 5e-6 to 3e-4 across task families"),

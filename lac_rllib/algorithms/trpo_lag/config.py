@@ -47,6 +47,7 @@ class TRPOLagConfig(TrustRegionConfig):
     """Config for :class:`lac_rllib.algorithms.trpo_lag.algorithm.TRPOLag`; fields: :class:`TRPOLagParams`."""
 
     ALGO = "trpo_lag"
+    OMNISAFE_NAME = "TRPOLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = TRPOLagParams, fields.FieldSet(TRPOLagParams, "TRPO-Lag"), PRESETS
     SEARCH_SPACE = {
         "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
