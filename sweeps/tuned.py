@@ -212,15 +212,16 @@ def pick_winners(summary, fields_of: dict, k: int) -> list[dict]:
             for r in rows.to_dict("records")]
 
 
-def search_winners(tp: TunedPlan, algo: str, trials) -> list[dict]:
+def search_winners(tp: TunedPlan, algo: str, trials, summary=None) -> list[dict]:
     """``algo``'s winners (:func:`pick_winners`) from its search's ``trials`` (each with the values of
-    the fields it searched)."""
+    the fields it searched) and their ``summary`` (summarized here where not given)."""
     from sweeps.reports.report import summarize
 
     if not len(trials):
         return []
     fields = tp.searches[algo].sweep.search or ()
-    return pick_winners(summarize(trials), followup.fields_of(trials, fields), tp.sweep.tune.top)
+    summary = summarize(trials) if summary is None else summary
+    return pick_winners(summary, followup.fields_of(trials, fields), tp.sweep.tune.top)
 
 
 def tuned_report(tp: TunedPlan, searched: dict, confirmation) -> tuple[dict, dict, str]:
@@ -230,9 +231,9 @@ def tuned_report(tp: TunedPlan, searched: dict, confirmation) -> tuple[dict, dic
     from sweeps.reports import tuned as report
     from sweeps.reports.report import summarize
 
-    winners = {algo: search_winners(tp, algo, trials) for algo, trials in searched.items()}
-    runs = {algo: (trials, summarize(trials) if len(trials) else pd.DataFrame(), tp.searches[algo].timesteps)
-            for algo, trials in searched.items()}
+    summaries = {algo: summarize(trials) if len(trials) else pd.DataFrame() for algo, trials in searched.items()}
+    winners = {algo: search_winners(tp, algo, trials, summaries[algo]) for algo, trials in searched.items()}
+    runs = {algo: (trials, summaries[algo], tp.searches[algo].timesteps) for algo, trials in searched.items()}
     comparison = report.comparison(runs, winners, confirmation)
     return winners, comparison, report.markdown(tp, comparison)
 
@@ -258,8 +259,8 @@ def run_tuned(tp: TunedPlan, run_plan) -> int:
             rc = run_plan(plan, checked_sweep_dir(plan))
             if rc != 0:
                 return rc
-        searched[algo], _ = followup.read_back(plan, plan.sweep.search or ())
-        winners[algo] = search_winners(tp, algo, searched[algo])
+        searched[algo], summary = followup.read_back(plan, plan.sweep.search or ())
+        winners[algo] = search_winners(tp, algo, searched[algo], summary)
         if not winners[algo]:
             print(f"tune: {algo}'s search finished no configuration; nothing to confirm", flush=True)
             return 1
