@@ -154,6 +154,8 @@ class FusedMinibatchLoop(TorchLearner):
                 self.reports_minibatch = i == len(plan) - 1
                 for mid in minibatch:
                     rows[mid] += len(plan[i][mid])
+                if not self.reports_minibatch and self.skip_minibatch({mid: len(plan[i][mid]) for mid in minibatch}):
+                    continue
                 # RLModule.forward_train, not TorchRLModule's: the same forward without the train() call.
                 fwd_out = {mid: RLModule.forward_train(self.module[mid], mb) for mid, mb in minibatch.items()}
                 loss_per_module = self.compute_losses(fwd_out=fwd_out, batch=minibatch)
@@ -163,6 +165,14 @@ class FusedMinibatchLoop(TorchLearner):
             self.reports_minibatch = True
         self._log_rows_trained(rows, sizes)
         return fwd_out, loss_per_module, {}
+
+    def skip_minibatch(self, rows: dict[Any, int]) -> bool:
+        """Whether the next minibatch (``rows`` per module) would step no network of any module and
+        need no check: the learner then counts its rows as its losses would and the loop runs neither
+        its forward pass nor its losses (nothing would have changed: the same update). The reported
+        minibatch, the last, always runs. Never here; the on-policy learners skip what their KL early
+        stop has stopped (constrained/on_policy_learner.py)."""
+        return False
 
     def _log_rows_trained(self, rows: dict, sizes: dict) -> None:
         """The steps-trained metrics of the rows trained beyond the one batch RLlib counts itself,

@@ -264,6 +264,33 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
                     progress.stopped_after = progress.epoch + int(config.kl_stop_late)
         progress.rows += minibatch_rows
 
+    @override(FusedMinibatchLoop)
+    def skip_minibatch(self, rows: dict[str, int]) -> bool:
+        """Once the KL early stop has stopped every network of every module (``kl_stop_critics``), a
+        minibatch steps nothing [O breaks out of its epochs instead]: its rows are counted, as
+        :meth:`check_kl_at_epoch_end` would, and its forward pass and losses skipped."""
+        epochs = {}
+        for mid in rows:
+            progress, whole = self.progress.get(mid), self.cost_gae.last_batch.get(mid)
+            if progress is None or whole is None:
+                return False
+            size = len(whole[Columns.LOSS_MASK])
+            epochs[mid] = progress.rows // size
+            if not self.idle(mid, epochs[mid], (progress.rows + rows[mid]) // size):
+                return False
+        for mid, n in rows.items():
+            self.progress[mid].epoch = epochs[mid]
+            self.progress[mid].rows += n
+        return True
+
+    def idle(self, module_id, epoch: int, end_epoch: int) -> bool:
+        """Whether a minibatch starting in ``epoch`` (its end in ``end_epoch``) would step none of
+        ``module_id``'s networks and check nothing: the KL early stop has stopped them all for the rest
+        of the update."""
+        progress = self.progress[module_id]
+        return (progress.stopped_after is not None and epoch >= progress.stopped_after
+                and self.config.get_config_for_module(module_id).kl_stop_critics)
+
     def stopped_optimizers(self, module_id) -> tuple[str, ...]:
         progress = self.progress.get(module_id)
         if progress is None or progress.stopped_after is None or progress.epoch < progress.stopped_after:

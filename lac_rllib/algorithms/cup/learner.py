@@ -144,6 +144,16 @@ class CUPTorchLearner(PPOLagTorchLearner):
                 projection.stopped_after = progress.epoch  # [O] breaks before the next epoch
         progress.rows += minibatch_rows
 
+    @override(PPOLagTorchLearner)
+    def idle(self, module_id, epoch: int, end_epoch: int) -> bool:
+        """Stage 1: PPO-Lag's stop, up to stage 1's last minibatch (which reports stage 1's
+        statistics; the next takes π_stage1's snapshot). Stage 2: once its own KL stop has ended the
+        projection (the critics never step there)."""
+        projection = self.projections[module_id]
+        if projection.reference is None:
+            return end_epoch < projection.first_epoch and super().idle(module_id, epoch, end_epoch)
+        return projection.stopped_after is not None and epoch >= projection.stopped_after
+
     def stopped_optimizers(self, module_id) -> tuple[str, ...]:
         """Stage 1: PPO-Lag's KL stop. Stage 2 never steps the critics [O: actor_optimizer only],
         nor the policy once its own KL stop has ended the projection."""
