@@ -172,8 +172,9 @@ class BatchedNavigationEnv(VectorEnv):
 
     def _frame(self, sims) -> rules.Frame:
         touching = [_touching(s) for s in sims] if self._contacts else [{}] * len(sims)
-        return rules.Frame(xpos=np.stack([s.xpos[s.bodies] for s in sims]), groups=self._layout.groups,
-                           touching=touching, tasks=[s.task for s in sims])
+        # ``take``, not fancy indexing: the same copy, half the time on arrays this small.
+        xpos = np.stack([s.xpos.take(s.bodies, axis=0) for s in sims])
+        return rules.Frame(xpos=xpos, groups=self._layout.groups, touching=touching, tasks=[s.task for s in sims])
 
     def _step_live(self, live, actions, obs, rewards, terminated, truncated, infos) -> dict:
         sims = [self._sims[i] for i in live]
@@ -196,7 +197,7 @@ class BatchedNavigationEnv(VectorEnv):
             except _resampling_error():
                 terminated[i] = True
             infos = self._add_info(infos, {"goal_met": True}, i)
-        xpos = np.stack([s.xpos[s.bodies] for s in sims]) if achieved.any() else frame.xpos
+        xpos = np.stack([s.xpos.take(s.bodies, axis=0) for s in sims]) if achieved.any() else frame.xpos
         self._steps[live] += 1
         truncated[live] = self._steps[live] >= self._horizon
         obs[live] = self._observe(sims, xpos)
@@ -224,7 +225,7 @@ class BatchedNavigationEnv(VectorEnv):
         c, layout = self._task.lidar_conf, self._layout
         obs = np.empty((len(sims), self.single_observation_space.shape[0]), self.observation_space.dtype)
         mat = np.stack([s.xmat[s.bodies[0]] for s in sims]).reshape(-1, 3, 3)
-        raw = np.stack([s.sensordata[s.raw] for s in sims])
+        raw = np.stack([s.sensordata.take(s.raw) for s in sims])
         # Every lidar at once: one egocentric transform and one pass over all the objects seen.
         ego = layer.ego_xy(xpos[:, 1:], xpos[:, 0], mat)
         lidars = dict(zip(layout.seen, layer.pseudo_lidars(ego, layout.seen_slices, c.num_bins, c.max_dist,

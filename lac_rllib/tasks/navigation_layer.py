@@ -46,40 +46,38 @@ def pseudo_lidars(ego: np.ndarray, groups: list[slice], num_bins: int, max_dist:
     """One (N, num_bins) lidar per group of objects (``groups``: slices of ``ego``'s K objects),
     every object's distance, angle and bin computed in one pass. A bin is the max over the readings
     its objects write there (its own bin's and, aliased, its neighbours'): exact in any order, so
-    taken over one one-hot array (N, readings, bins) with the readings of each group side by side
-    (one ``reduceat`` at the groups' starts) rather than written object by object."""
+    every reading of every env and group goes into one flat (N, groups, bins) array by one
+    ``np.maximum.at``, rather than object by object."""
     z = ego[..., 0] + 1j * ego[..., 1]
     dist = np.abs(z)
-    angle = np.angle(z) % (np.pi * 2)
+    angle = np.arctan2(z.imag, z.real) % (np.pi * 2)  # np.angle(z), as its own code computes it
     bin_size = (np.pi * 2) / num_bins
     bins = (angle / bin_size).astype(np.int64)  # int() of a non-negative float: truncation
     if max_dist is None:
         sensor = np.exp(-exp_gain * dist)
     else:
         sensor = np.maximum(0, max_dist - dist) / max_dist
-    where, value = [bins], [sensor]
+    n, k = ego.shape[:2]
+    first = _first_bins(n, k, tuple((g.start, g.stop) for g in groups), num_bins)
     if alias:
         frac = (angle - bin_size * bins) / bin_size
-        where += [(bins + 1) % num_bins, (bins - 1) % num_bins]
-        value += [frac * sensor, (1 - frac) * sensor]
-    n, k, r = ego.shape[0], ego.shape[1], len(where)
-    filled = [g for g in groups if g.stop > g.start]
-    out = {}
-    if filled:
-        columns, starts = _gather(k, r, tuple((g.start, g.stop) for g in filled))
-        b, v = np.concatenate(where, axis=1)[:, columns], np.concatenate(value, axis=1)[:, columns]
-        one_hot = np.where(b[..., None] == np.arange(num_bins), v[..., None], 0.0)
-        best = np.maximum.reduceat(one_hot, starts, axis=1)
-        out = {id(g): best[:, i] for i, g in enumerate(filled)}
-    return [out[id(g)] if id(g) in out else np.zeros((n, num_bins)) for g in groups]
+        where = np.concatenate([first + bins, first + (bins + 1) % num_bins, first + (bins - 1) % num_bins], axis=None)
+        value = np.concatenate([sensor, frac * sensor, (1 - frac) * sensor], axis=None)
+    else:
+        where, value = (first + bins).ravel(), sensor.ravel()
+    out = np.zeros((n, len(groups) + 1, num_bins))  # the last: the readings of objects in no group
+    np.maximum.at(out.reshape(-1), where, value)
+    return [out[:, i] for i in range(len(groups))]
 
 
 @functools.lru_cache(maxsize=64)
-def _gather(k: int, r: int, spans: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """Reading j of object i sits at column j·K + i of the readings side by side: each group's
-    columns gathered together, and where each group starts (the same every step of a task)."""
-    columns = np.concatenate([np.arange(a, b) + j * k for a, b in spans for j in range(r)])
-    return columns, np.cumsum([0] + [(b - a) * r for a, b in spans[:-1]])
+def _first_bins(n: int, k: int, spans: tuple, num_bins: int) -> np.ndarray:
+    """(N, K): where object i of env e writes in the flat (N, groups + 1, bins) output, its bin 0;
+    an object in no group writes in the last, unread (the same every step of a task)."""
+    group = np.full(k, len(spans), np.int64)
+    for g, (a, b) in enumerate(spans):
+        group[a:b] = g
+    return (np.arange(n)[:, None] * (len(spans) + 1) + group) * num_bins
 
 
 def dist_xy(points: np.ndarray, agent_pos: np.ndarray) -> np.ndarray:
