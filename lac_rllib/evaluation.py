@@ -20,7 +20,11 @@ this process, without ``ray.init``:
   path it ran under (from the Python path or the working directory: lac_rllib/algorithms/registry.py).
 
 ``evaluate(policy, episodes, seed, actions=...)`` runs ``episodes`` episodes, episode ``i``
-reset with seed ``seed + i``, fully deterministic for equal seeds:
+reset with seed ``seed + i``, fully deterministic for equal seeds. A task run on its batched
+backend (``env_backend: batched``, the navigation ids' default) plays up to 10 episodes at a time in
+one vector env of that backend, each episode's actions computed alone: the same episodes as one
+env plays them, bit for bit (tests/test_evaluation.py), in less time. Video records one env:
+Safety-Gymnasium's, which renders.
 
 * ``actions="generator"`` (every algorithm): the policy's deterministic action
   (``module.deterministic_action``: the mean, as the env receives it);
@@ -451,6 +455,67 @@ def _sampled_action(policy: Policy, obs: torch.Tensor, episode, shared: dict) ->
     return torch.as_tensor(np.asarray(action, dtype=np.float32)).reshape(1, -1)
 
 
+#: Episodes an evaluation plays together, at most, on a task's batched backend (one vector env).
+EVAL_LANES = 10
+
+
+def _lanes(policy: Policy, episodes: int) -> int:
+    """How many episodes to play together: 1 (one env), or on a task run on its batched backend
+    (``env_backend: batched``) up to :data:`EVAL_LANES`, in groups as even as they come."""
+    from lac_rllib.tasks import get_task
+
+    if not get_task(policy.task_id).batched or policy.env_config.get("env_backend", "batched") != "batched":
+        return 1
+    groups = math.ceil(episodes / EVAL_LANES)
+    return math.ceil(episodes / groups)
+
+
+@dataclasses.dataclass
+class _Lane:
+    """One episode of a group being played: its RLlib episode, its noise and its tallies."""
+
+    episode: Any                # SingleAgentEpisode: what the env-to-module pipeline reads
+    generator: torch.Generator  # a mode's own noise (LAC's chain), seeded with the episode's seed
+    rng: torch.Tensor           # torch's global RNG state of this episode (the stochastic mode's samples)
+    ret: float = 0.0
+    cost: float = 0.0
+    t: int = 0
+    done: bool = False
+
+
+class _Envs:
+    """One env (``width`` 1) or a vector env of ``width`` envs, each env k playing one episode of a
+    group: reset with ``seed + k`` (the vector env's own seeding), stepped with its episode's
+    actions until it ends, then left out. On the batched backend each env is stock
+    Safety-Gymnasium step for step (docs/speed/batched-equality.md), and each episode's actions are
+    computed alone, as with one env: the same episodes, several at a time."""
+
+    def __init__(self, env, width: int) -> None:
+        self.env, self.width = env, width
+
+    def reset(self, seed: int) -> list[tuple]:
+        if self.width == 1:
+            return [self.env.reset(seed=seed)]
+        obs, infos = self.env.reset(seed=seed)
+        return [(obs[k], _env_info(infos, k)) for k in range(self.width)]
+
+    def step(self, chosen: dict[int, np.ndarray]) -> dict[int, tuple]:
+        """``chosen``: env k → its action, for the envs still playing; their step, by env."""
+        if self.width == 1:
+            return {0: self.env.step(chosen[0])}
+        batch = np.zeros(self.env.action_space.shape, self.env.action_space.dtype)
+        for k, action in chosen.items():
+            batch[k] = action
+        obs, rewards, terminated, truncated, infos = self.env.step(batch)
+        return {k: (obs[k], rewards[k], terminated[k], truncated[k], _env_info(infos, k)) for k in chosen}
+
+
+def _env_info(infos: dict, k: int) -> dict:
+    """Env ``k``'s info from a vector env's infos (gymnasium's dict of arrays, ``_key`` masks)."""
+    return {key: value[k] for key, value in infos.items()
+            if not key.startswith("_") and infos.get(f"_{key}", np.ones(k + 1, bool))[k]}
+
+
 def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
              langevin_steps: int | None = None, langevin_step_size: float | None = None,
              video_dir: str | None = None, progress: bool = True) -> dict:
@@ -492,56 +557,71 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
             _notice(video_notice)
         else:
             os.makedirs(video_dir, exist_ok=True)
+    width = 1 if env is not None else _lanes(policy, episodes)
     if env is None:
-        env = get_task(policy.task_id).make(dict(policy.env_config))
+        config = dict(policy.env_config) | ({"num_envs": width} if width > 1 else {})
+        env = get_task(policy.task_id).make(config)
+    envs = _Envs(env, width)
     fps = float((env.metadata or {}).get("render_fps") or 30)
+    video = video_notice is None and video_dir is not None  # one env then (width 1), an episode at a time
 
     returns, costs, lengths = [], [], []
     diagnostics: dict[str, list[float]] = {}
     bar = _Progress(episodes, f"eval {actions}", progress)
     rng_state = torch.random.get_rng_state()  # the stochastic mode seeds torch per episode; restored after
     try:
-        for i in range(episodes):
-            obs, info = env.reset(seed=seed + i)
-            torch.manual_seed(seed + i)  # the stochastic mode's samples (RLlib's, from torch's global RNG)
-            generator = torch.Generator().manual_seed(seed + i)  # a mode's noise (unused by "generator")
-            episode = SingleAgentEpisode(observations=[obs], infos=[info],
-                                         observation_space=policy.env_to_module.input_observation_space,
-                                         action_space=policy.env_to_module.input_action_space)
-            recorder = _Recorder(env) if video_notice is None and video_dir is not None else None
-            ret, cost, t, done = 0.0, 0.0, 0, False
-            while not done:
+        for first in range(0, episodes, width):
+            group = []  # episodes first.. of this group, episode i on env i - first, reset with seed + i
+            recorder = _Recorder(env) if video else None
+            for k, (obs, info) in enumerate(envs.reset(seed + first)[:episodes - first]):
+                torch.manual_seed(seed + first + k)  # the stochastic mode's samples (RLlib's, from torch's global RNG)
+                group.append(_Lane(
+                    episode=SingleAgentEpisode(observations=[obs], infos=[info],
+                                               observation_space=policy.env_to_module.input_observation_space,
+                                               action_space=policy.env_to_module.input_action_space),
+                    generator=torch.Generator().manual_seed(seed + first + k),  # a mode's noise
+                    rng=torch.random.get_rng_state()))
+            while not all(lane.done for lane in group):
+                chosen = {}
+                for k, lane in enumerate(group):
+                    if lane.done:
+                        continue
+                    if recorder is not None:
+                        recorder.capture(lane.t)
+                    torch.random.set_rng_state(lane.rng)  # this episode's own stream of torch's global RNG
+                    shared = {}  # what the env-to-module pipeline leaves for the module-to-env one
+                    batch = policy.env_to_module(episodes=[lane.episode], rl_module=module,
+                                                 explore=actions == STOCHASTIC, shared_data=shared)
+                    s = batch[Columns.OBS]
+                    with torch.no_grad():
+                        if actions == GENERATOR:
+                            action = module.deterministic_action(s)
+                        elif actions == STOCHASTIC:
+                            action = _sampled_action(policy, s, lane.episode, shared)
+                        else:  # the module's own mode (ACTIONS)
+                            action, diag = module.evaluation_action(s, actions, generator=lane.generator, **options)
+                            for name, value in diag.items():
+                                diagnostics.setdefault(name, []).append(value)
+                    lane.rng = torch.random.get_rng_state()
+                    chosen[k] = np.clip(action[0].numpy().astype(np.float32), low, high)
+                for k, (obs, reward, terminated, truncated, info) in envs.step(chosen).items():
+                    lane = group[k]
+                    lane.ret += float(reward)
+                    lane.cost += gamma_c**lane.t * step_cost(info)  # the task's convention, as in training
+                    lane.t += 1
+                    lane.done = bool(terminated or truncated)
+                    lane.episode.add_env_step(obs, chosen[k], float(reward), infos=info,
+                                              terminated=bool(terminated), truncated=bool(truncated))
+            for k, lane in enumerate(group):
+                i = first + k
+                returns.append(lane.ret)
+                costs.append(lane.cost)
+                lengths.append(lane.t)
                 if recorder is not None:
-                    recorder.capture(t)
-                shared = {}  # what the env-to-module pipeline leaves for the module-to-env one (batch structure)
-                batch = policy.env_to_module(episodes=[episode], rl_module=module, explore=actions == STOCHASTIC,
-                                             shared_data=shared)
-                s = batch[Columns.OBS]
-                with torch.no_grad():
-                    if actions == GENERATOR:
-                        action = module.deterministic_action(s)
-                    elif actions == STOCHASTIC:
-                        action = _sampled_action(policy, s, episode, shared)
-                    else:  # the module's own mode (ACTIONS)
-                        action, diag = module.evaluation_action(s, actions, generator=generator, **options)
-                        for name, value in diag.items():
-                            diagnostics.setdefault(name, []).append(value)
-                action = np.clip(action[0].numpy().astype(np.float32), low, high)
-                obs, reward, terminated, truncated, info = env.step(action)
-                ret += float(reward)
-                cost += gamma_c**t * step_cost(info)  # the task's convention, as in training
-                t += 1
-                done = bool(terminated or truncated)
-                episode.add_env_step(obs, action, float(reward), infos=info,
-                                     terminated=bool(terminated), truncated=bool(truncated))
-            returns.append(ret)
-            costs.append(cost)
-            lengths.append(t)
-            if recorder is not None:
-                recorder.capture(t, force=True)
-                videos.append(_write_video(recorder.frames, os.path.join(
-                    video_dir, f"episode_{i:03d}_seed_{seed + i}_{actions}"), fps / recorder.stride))
-            bar.update(ret=f"{ret:.3g}", cost=f"{cost:.3g}")
+                    recorder.capture(lane.t, force=True)
+                    videos.append(_write_video(recorder.frames, os.path.join(
+                        video_dir, f"episode_{i:03d}_seed_{seed + i}_{actions}"), fps / recorder.stride))
+                bar.update(ret=f"{lane.ret:.3g}", cost=f"{lane.cost:.3g}")
     finally:
         torch.random.set_rng_state(rng_state)
         bar.close()

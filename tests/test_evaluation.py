@@ -347,3 +347,37 @@ def test_the_evaluation_blocks_env_seeds_are_disjoint_from_training(ray_session,
     results = evaluation_block(path, 3, seed=3)
     assert [r["actions"] for r in results] == ["generator", "stochastic"] and all(r["episodes"] == 3 for r in results)
     assert seeds == [eval_seed(3) + i for i in range(3)] * 2 and not training & set(seeds)
+
+
+@pytest.mark.parametrize("algo, modes, robot", [("ppo_lag", ("generator", "stochastic"), "safety_gym"),
+                                                ("lac", ("langevin",), "safety_gymnasium")])
+def test_a_batched_task_plays_its_episodes_together_as_one_env_plays_them(ray_session, monkeypatch, tmp_path,
+                                                                         algo, modes, robot):
+    """On the batched backend the evaluation plays its episodes in one vector env (3 here); every
+    episode's return, cost and length equal the stock env's, one episode at a time, in each mode.
+    The checkpoint carries the env it trained on (its robot), and the evaluation builds that one."""
+    from lac_rllib.algorithms.registry import build_config
+    from lac_rllib.evaluation import _lanes
+    from lac_rllib.tasks.batched_navigation import BatchedNavigationEnv
+
+    trainer = build_config(algo, "SafetyPointGoal1-v0", 0, {"robot_variant": robot}, timesteps=10_000).build_algo()
+    try:
+        path = trainer.save_to_path(str(tmp_path / "ckpt"))
+    finally:
+        trainer.stop()
+    policy = restore_policy(path)
+    assert policy.env_config["env_backend"] == "batched" and _lanes(policy, 3) == 3
+    assert policy.env_config["robot_variant"] == robot
+    steps, step = [], BatchedNavigationEnv.step
+    monkeypatch.setattr(BatchedNavigationEnv, "step", lambda self, a: steps.append(len(a)) or step(self, a))
+    for mode in modes:
+        policy.env_config.update(env_backend="batched", max_episode_steps=40)
+        together = evaluate(policy, 3, seed=5, actions=mode, progress=False)
+        assert steps and set(steps) == {3}  # one vector env of 3 played them
+        steps.clear()
+        policy.env_config["env_backend"] = "stock"
+        alone = evaluate(policy, 3, seed=5, actions=mode, progress=False)
+        assert not steps
+        assert together["lengths"] == alone["lengths"] == [40] * 3
+        assert together["returns"] == alone["returns"] and together["costs"] == alone["costs"]
+        assert len(set(together["returns"])) == 3  # three different episodes

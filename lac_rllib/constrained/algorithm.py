@@ -81,6 +81,8 @@ class SafeAlgorithm(Algorithm):
             "cost_limit": cfg.effective_cost_limit,
             "episode_cost_discount": cfg.effective_episode_cost_discount,
             "algo_config": cfg.params(),  # the algorithm's fields
+            # The env as trained (its backend, a Point task's robot): the evaluation builds it again.
+            "env_config": dict(cfg.env_config or {}),
             "resolved": cfg.resolved(),  # what rule-valued fields ("auto") ran as on the learner's machine
         }
         if cfg.task_spec is not None and cfg.task_spec.factory == user_tasks.FACTORY:
