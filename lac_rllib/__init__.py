@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import importlib
 
+from lac_rllib import moved_modules
+
 __version__ = "0.3.0"
+moved_modules.install()  # checkpoints written before a module moved still restore
 
 #: Public name -> the module that defines it.
 _EXPORTS = {

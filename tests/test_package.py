@@ -65,16 +65,19 @@ def _imports(path: Path) -> set[str]:
 
 
 def test_imports_go_one_way():
-    """sweeps -> algorithms -> constrained -> tasks; inside an algorithm only RLlib's Config <->
-    Algorithm pattern points back (the config names its algorithm, module and learner classes)."""
+    """sweeps -> algorithms -> families -> constrained -> tasks; inside an algorithm only RLlib's
+    Config <-> Algorithm pattern points back (the config names its algorithm, module and learner classes)."""
     package = ROOT / "lac_rllib"
     bad = []
     for path in sorted(package.rglob("*.py")):
         mine, rel = _imports(path), str(path.relative_to(ROOT))
-        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/", "lac_rllib/algorithms/")):
+        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/", "lac_rllib/algorithms/",
+                           "lac_rllib/families/")):
             bad += [f"{rel} imports {m}" for m in mine if m.startswith("sweeps")]
-        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/")):
+        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/", "lac_rllib/families/")):
             bad += [f"{rel} imports {m}" for m in mine if m.startswith("lac_rllib.algorithms")]
+        if rel.startswith(("lac_rllib/constrained/", "lac_rllib/tasks/")):
+            bad += [f"{rel} imports {m}" for m in mine if m.startswith("lac_rllib.families")]
         if rel.startswith("lac_rllib/tasks/"):
             bad += [f"{rel} imports {m}" for m in mine if m.startswith("lac_rllib.constrained")]
         if rel.startswith("lac_rllib/algorithms/lac/") and not rel.endswith(("config.py", "algorithm.py")):
@@ -86,10 +89,11 @@ ALGO_DIR = ROOT / "lac_rllib" / "algorithms"
 
 
 def test_no_algorithm_folder_imports_another_but_its_house():
-    """What two algorithms share lives in lac_rllib/constrained/ (the on-policy, trust-region and
-    off-policy bases, the multiplier, plumbing); an algorithm built on another (its config class
-    extends the other's: FOCOPS, CUP, RESPO on PPO-Lag, PCPO on CPO; registry.house) imports that
-    folder and no other: a folder importing another's learner that is not its declared base fails."""
+    """What two algorithms share lives in lac_rllib/families/ (the on-policy, trust-region and
+    off-policy bases) and lac_rllib/constrained/ (the multiplier, plumbing); an algorithm built on
+    another (its config class extends the other's: FOCOPS, CUP, RESPO on PPO-Lag, PCPO on CPO;
+    registry.house) imports that folder and no other: a folder importing another's learner that is
+    not its declared base fails."""
     from lac_rllib.algorithms.registry import ALGOS, house
 
     folders = sorted(p.name for p in ALGO_DIR.iterdir() if (p / "__init__.py").exists())
@@ -208,7 +212,7 @@ def test_no_import_circle_in_the_repository():
     """No circle among the modules of lac_rllib/, sweeps/ and benchmarks/, imports inside functions
     included; the sweep CLI (sweeps/run.py) imports the rest of sweeps/ and none of them imports it."""
     graph = module_graph()
-    assert {"lac_rllib.constrained.on_policy_learner", "sweeps.run", "benchmarks.revision"} <= set(graph)
+    assert {"lac_rllib.families.on_policy.learner", "sweeps.run", "benchmarks.revision"} <= set(graph)
     assert "benchmarks.revision" in graph["benchmarks.update_step"]  # bare sibling imports are followed
     circle = import_circle(graph)
     assert circle is None, "import circle: " + " -> ".join(circle)

@@ -177,8 +177,8 @@ def algorithm_class(algo: str) -> type:
 def house(algo: str) -> str | None:
     """The package's algorithm that ``algo`` is built on: the nearest one whose config class
     ``algo``'s extends (FOCOPS, CUP, RESPO: ``ppo_lag``; PCPO: ``cpo``; a user's: the one it
-    extends); None if it extends none (PPO-Lag, P3O, TRPO-Lag and CPO extend the shared bases of
-    lac_rllib/constrained/). An algorithm folder imports from no other but its house's, and
+    extends); None if it extends none (PPO-Lag, P3O, TRPO-Lag and CPO extend the family bases of
+    lac_rllib/families/). An algorithm folder imports from no other but its house's, and
     benchmarks time an algorithm against its house's step."""
     builtin = {algo_config(a): a for a in ALGOS}
     return next((builtin[c] for c in algo_config(algo).__mro__[1:] if c in builtin), None)

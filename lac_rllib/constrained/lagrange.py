@@ -11,7 +11,7 @@ state. Its *value* is the RLModule's ν buffer, which the multiplier is the only
 buffer travels with the module's weights, so env runners, checkpoints and a restored policy
 (``--actions langevin``) all see the same ν.
 
-Plain torch, no RLlib: the learners call it (LAC's, SAC-Lag's, constrained/lagrangian_learner.py).
+Plain torch, no RLlib: the learners call it (LAC's, SAC-Lag's, families/on_policy/lagrangian.py).
 """
 
 from __future__ import annotations

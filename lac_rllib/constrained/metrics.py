@@ -54,20 +54,8 @@ COST_WINDOW_MEAN = "cost_window_mean"  # Ĵ_C that ν's step used (NaN: no episo
 KL_FULL_BATCH = "kl_full_batch"  # KL(π_old ‖ π) over the batch at the last epoch check
 EPOCHS_TRAINED = "epochs_before_kl_stop"  # epochs the policy trained this iteration
 PPO_LAG_KEYS = (POLICY_LOSS, VF_LOSS, COST_VF_LOSS, COST_WINDOW_MEAN, KL_FULL_BATCH, EPOCHS_TRAINED)
-# The first-order baselines on PPO-Lag's house (their own, beside PPO-Lag's).
-TRUST_REGION_FRACTION = "trust_region_fraction"  # FOCOPS: fraction of rows with KL(π ‖ π_old) ≤ η, last minibatch
-COST_PENALTY = "cost_penalty"  # P3O: κ·ReLU(mean(r·A^C) + Ĵ_C − b), last minibatch
-PROJECTION_LOSS = "projection_loss"  # CUP: stage 2's loss, last minibatch
-PROJECTION_EPOCHS = "projection_epochs"  # CUP: epochs stage 2 trained before its KL stop
-PROJECTION_KL = "projection_kl"  # CUP: KL(π_stage1 ‖ π) over the batch at stage 2's last check
-REACH_VF_LOSS = "reach_vf_loss"  # RESPO: masked mean (V_p − p-target)², last minibatch
-REACH_PROB_MEAN = "reach_prob_mean"  # RESPO: mean V_p(s) over the batch at collection
-# The trust-region baselines (TRPO-Lag, CPO, PCPO): one step of the policy per iteration, whose
-# KL(π_old ‖ π) over the batch afterwards is KL_FULL_BATCH.
-LINE_SEARCH_FRACTION = "line_search_fraction"  # the fraction of the full step kept; 0: none accepted, θ_old kept
-LINE_SEARCH_BACKTRACKS = "line_search_backtracks"  # fractions rejected before the accepted one (all if none)
-COST_GAP = "cost_gap"  # CPO, PCPO: c = Ĵ_C − b as the step used it (cost_gap_scale); NaN: no episode yet
-CPO_CASE = "cpo_case"  # CPO: the case of its step, 0-4 (OmniSafe's numbering: 3-4 TRPO, 1-2 dual, 0 recovery)
+# An algorithm's own keys are declared in its config (FOCOPS, P3O, CUP, RESPO, CPO), a family's in
+# its base's (the trust-region line search: lac_rllib/families/trust_region/config.py).
 #: A row's values that must be finite: a NaN here fails the trial (sweeps/trainable.py).
 MUST_BE_FINITE = (CRITIC_LOSS, ACTOR_LOSS, NU)
 

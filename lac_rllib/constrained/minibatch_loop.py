@@ -171,7 +171,7 @@ class FusedMinibatchLoop(TorchLearner):
         need no check: the learner then counts its rows as its losses would and the loop runs neither
         its forward pass nor its losses (nothing would have changed: the same update). The reported
         minibatch, the last, always runs. Never here; the on-policy learners skip what their KL early
-        stop has stopped (constrained/on_policy_learner.py)."""
+        stop has stopped (families/on_policy/learner.py)."""
         return False
 
     def _log_rows_trained(self, rows: dict, sizes: dict) -> None:

@@ -25,8 +25,8 @@ from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS
 from lac_rllib.constrained.metrics import COST_VF_LOSS, TS_EPISODE_COSTS
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "golden"
 REQUIRED_META = ("reference", "reference_version", "algorithm", "command")  # benchmarks/golden/fixture.py

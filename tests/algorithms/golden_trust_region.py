@@ -18,9 +18,9 @@ from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
 
 from lac_rllib.algorithms.cpo import learner as cpo_learner
 from lac_rllib.algorithms.pcpo import learner as pcpo_learner
-from lac_rllib.constrained import trust_region_learner as trpo_learner
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.metrics import COST_VF_LOSS, TS_EPISODE_COSTS
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.trust_region import learner as trpo_learner
 from tests.algorithms.golden import OMNISAFE_ON_POLICY, Fixture, build_on_policy, minibatch_step, on_policy_batch, ours
 
 REVERSE = {v: k for k, v in OMNISAFE_ON_POLICY.items()}

@@ -12,9 +12,9 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
 from lac_rllib.algorithms import registry
-from lac_rllib.constrained import on_policy as on_policy_algorithm
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.metrics import COST_RATE, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU
+from lac_rllib.families.on_policy import algorithm as on_policy_algorithm
 
 FIRST_ORDER = ("focops", "cup", "p3o", "respo")
 TRUST_REGION = ("trpo_lag", "cpo", "pcpo")

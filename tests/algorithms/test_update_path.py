@@ -58,7 +58,7 @@ def test_minibatches_the_kl_stop_left_idle_are_skipped_and_change_nothing(ray_se
     """The fused loop skips the forward pass and losses of a minibatch that would step no network
     (OnPolicyTorchLearner.skip_minibatch): the weights and every reported figure are those of the
     loop that runs them all."""
-    from lac_rllib.constrained.on_policy_learner import OnPolicyTorchLearner
+    from lac_rllib.families.on_policy.learner import OnPolicyTorchLearner
 
     skipped, original = [], OnPolicyTorchLearner.skip_minibatch
 

@@ -1,10 +1,10 @@
-"""CPO: the on-policy family's training step (constrained/on_policy.py: sample, one learner update,
+"""CPO: the on-policy family's training step (families/on_policy/algorithm.py: sample, one learner update,
 sync) with CPO's learner."""
 
 from __future__ import annotations
 
 from lac_rllib.algorithms.cpo.config import CPOConfig
-from lac_rllib.constrained.on_policy import OnPolicySafeAlgorithm
+from lac_rllib.families.on_policy.algorithm import OnPolicySafeAlgorithm
 
 
 class CPO(OnPolicySafeAlgorithm):

@@ -3,7 +3,7 @@
 CPO takes the family's step (the whole batch, conjugate gradient, the line search) without a
 multiplier: the step solves the linearised problem max gᵀΔ s.t. bᵀΔ + c ≤ 0, ½ΔᵀHΔ ≤ δ in closed
 form from its dual, recovering along −H⁻¹b when no feasible point is in reach (learner.py;
-constrained/trust_region.py ``cpo_step``). :class:`CostStepParams` are the fields PCPO shares.
+families/trust_region/step.py ``cpo_step``). :class:`CostStepParams` are the fields PCPO shares.
 
 Source tags: [O] OmniSafe CPO (configs/on-policy/CPO.yaml, second_order/cpo.py), [S]
 safety-starter-agents CPO (pg/agents.py ``CPOAgent``: the paper's CPO, App. D), [D] ours. The
@@ -15,10 +15,10 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from lac_rllib.constrained import fields, metrics
+from lac_rllib.constrained import fields
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
-from lac_rllib.constrained.search_space import Searched, lr
-from lac_rllib.constrained.trust_region_config import (
+from lac_rllib.constrained.search_space import lr
+from lac_rllib.families.trust_region.config import (
     OMNISAFE_STEP,
     SSA_TRUST_REGION,
     TRUST_REGION_KEYS,
@@ -26,6 +26,10 @@ from lac_rllib.constrained.trust_region_config import (
     TrustRegionConfig,
     TrustRegionParams,
 )
+
+#: The learner's own result keys, beside the on-policy family's (lac_rllib/constrained/metrics.py).
+COST_GAP = "cost_gap"  # CPO, PCPO: c = Ĵ_C − b as the step used it (cost_gap_scale); NaN: no episode yet
+CPO_CASE = "cpo_case"  # CPO: the case of its step, 0-4 (OmniSafe's numbering: 3-4 TRPO, 1-2 dual, 0 recovery)
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "ssa")
 COST_GAP_SCALES = ("none", "episode_length")
@@ -84,10 +88,9 @@ class CPOConfig(TrustRegionConfig):
     OMNISAFE_NAME = "CPO"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = CPOParams, fields.FieldSet(CPOParams, "CPO"), PRESETS
     SEARCH_SPACE = {
-        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
-        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
+        **TrustRegionConfig.SEARCH_SPACE,
         "critic_lr": lr("[O] the critics' lr (CPO's cost critic sets its recovery steps)"),
     }
-    REPORTED_KEYS = (*TRUST_REGION_KEYS, metrics.COST_GAP, metrics.CPO_CASE)
+    REPORTED_KEYS = (*TRUST_REGION_KEYS, COST_GAP, CPO_CASE)
     ALGORITHM_CLASS = "lac_rllib.algorithms.cpo.algorithm.CPO"
     LEARNER_CLASS = "lac_rllib.algorithms.cpo.learner.CPOTorchLearner"

@@ -1,6 +1,6 @@
 """CPOTorchLearner: the trust-region base's learner with CPO's step and no multiplier. Source tags: [CPO]
 Achiam et al. 2017 (§6.1, §6.2, App. 10.2); [O] OmniSafe cpo.py ``_update_actor``; [S]
-safety-starter-agents agents.py ``CPOAgent.update_pi``. The maths is constrained/trust_region.py's.
+safety-starter-agents agents.py ``CPOAgent.update_pi``. The maths is families/trust_region/step.py's.
 
 At the update's first loss call, on the whole batch's real rows (the base's :class:`PolicyOnBatch`):
 
@@ -27,10 +27,12 @@ import torch
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.episode_lengths import EpisodeLengths
-from lac_rllib.constrained.metrics import COST_GAP, CPO_CASE, NU
-from lac_rllib.constrained.trust_region import (
+from lac_rllib.algorithms.cpo.config import COST_GAP, CPO_CASE
+from lac_rllib.algorithms.cpo.episode_lengths import EpisodeLengths
+from lac_rllib.constrained.metrics import NU
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.trust_region.learner import PolicyOnBatch, TrustRegionTorchLearner
+from lac_rllib.families.trust_region.step import (
     EPS,
     conjugate_gradient,
     cpo_acceptance,
@@ -38,7 +40,6 @@ from lac_rllib.constrained.trust_region import (
     fisher_vector_product,
     flat_grad,
 )
-from lac_rllib.constrained.trust_region_learner import PolicyOnBatch, TrustRegionTorchLearner
 
 #: The learner's own entry in its checkpointed state: the window of episode lengths.
 STATE_KEY = "cpo"

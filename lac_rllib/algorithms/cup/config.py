@@ -20,8 +20,13 @@ from lac_rllib.algorithms.ppo_lag import config as ppo_lag
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, POSITIVE, one_of, or_none, param
-from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, OnPolicyLagParams
-from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, Searched, lr
+from lac_rllib.constrained.search_space import Searched
+from lac_rllib.families.on_policy.config import OMNISAFE_BUDGET, OnPolicyLagParams
+
+#: The learner's own result keys, beside the on-policy family's (lac_rllib/constrained/metrics.py).
+PROJECTION_LOSS = "projection_loss"  # CUP: stage 2's loss, last minibatch
+PROJECTION_EPOCHS = "projection_epochs"  # CUP: epochs stage 2 trained before its KL stop
+PROJECTION_KL = "projection_kl"  # CUP: KL(π_stage1 ‖ π) over the batch at stage 2's last check
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -68,13 +73,11 @@ class CUPConfig(PPOLagConfig):
     OMNISAFE_NAME = "CUP"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = CUPParams, fields.FieldSet(CUPParams, "CUP"), PRESETS
     SEARCH_SPACE = {
-        "lr": lr(POLICY_LR),
-        "lagrangian_lr": lr(MULTIPLIER_LR),
-        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+        **PPOLagConfig.SEARCH_SPACE,
         "target_kl": Searched("loguniform", "[O] its projection's KL bound, 0.01 or 0.02 across presets",
                               around=3.0),
     }
-    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.PROJECTION_LOSS, metrics.PROJECTION_EPOCHS, metrics.PROJECTION_KL)
+    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, PROJECTION_LOSS, PROJECTION_EPOCHS, PROJECTION_KL)
     ALGORITHM_CLASS = "lac_rllib.algorithms.cup.algorithm.CUP"
     LEARNER_CLASS = "lac_rllib.algorithms.cup.learner.CUPTorchLearner"
 

@@ -32,13 +32,13 @@ from ray.rllib.core.distribution.torch.torch_distribution import TorchDiagGaussi
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
+from lac_rllib.algorithms.cup.config import PROJECTION_EPOCHS, PROJECTION_KL, PROJECTION_LOSS
 from lac_rllib.algorithms.cup.row_index import ROW_INDEX, AddRowIndex
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import PROJECTION_EPOCHS, PROJECTION_KL, PROJECTION_LOSS
 from lac_rllib.constrained.minibatch_loop import TS_MINIBATCHES
-from lac_rllib.constrained.on_policy_learner import POLICY, gaussian_logp
-from lac_rllib.constrained.projection import kl_to_reference
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.on_policy.learner import POLICY, gaussian_logp
+from lac_rllib.families.on_policy.projection import kl_to_reference
 
 
 @dataclasses.dataclass

@@ -20,8 +20,11 @@ from lac_rllib.algorithms.ppo_lag import config as ppo_lag
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import BOOL, POSITIVE, one_of, or_none, param
-from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, OnPolicyLagParams
-from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, Searched, lr
+from lac_rllib.constrained.search_space import Searched
+from lac_rllib.families.on_policy.config import OMNISAFE_BUDGET, OnPolicyLagParams
+
+#: The learner's own result keys, beside the on-policy family's (lac_rllib/constrained/metrics.py).
+TRUST_REGION_FRACTION = "trust_region_fraction"  # FOCOPS: fraction of rows with KL(π ‖ π_old) ≤ η, last minibatch
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe", "paper")
 
@@ -92,12 +95,12 @@ class FOCOPSConfig(PPOLagConfig):
     OMNISAFE_NAME = "FOCOPS"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = FOCOPSParams, fields.FieldSet(FOCOPSParams, "FOCOPS"), PRESETS
     SEARCH_SPACE = {
-        "lr": lr(POLICY_LR),
-        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "lr": PPOLagConfig.SEARCH_SPACE["lr"],
+        "lagrangian_lr": PPOLagConfig.SEARCH_SPACE["lagrangian_lr"],
         "focops_lam": Searched("uniform", "[F] Zhang et al. 2020 study FOCOPS's sensitivity to λ", (0.5, 3.0)),
         "focops_eta": Searched("loguniform", "[F] the trust-region indicator's radius δ (its KL bound)",
                                around=3.0),
     }
-    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.TRUST_REGION_FRACTION)
+    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, TRUST_REGION_FRACTION)
     ALGORITHM_CLASS = "lac_rllib.algorithms.focops.algorithm.FOCOPS"
     LEARNER_CLASS = "lac_rllib.algorithms.focops.learner.FOCOPSTorchLearner"

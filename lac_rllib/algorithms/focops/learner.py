@@ -25,10 +25,10 @@ import torch
 from ray.rllib.core.columns import Columns
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
+from lac_rllib.algorithms.focops.config import TRUST_REGION_FRACTION
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import TRUST_REGION_FRACTION
-from lac_rllib.constrained.projection import kl_to_reference, within
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.on_policy.projection import kl_to_reference, within
 
 
 class FOCOPSTorchLearner(PPOLagTorchLearner):

@@ -3,7 +3,7 @@
 One ``training_step`` = one iteration k of Algorithm 2:
   1. sample ``env_steps_per_iteration`` steps with the generator π_φ (uniform random actions
      in the first ``random_iterations`` iterations [C]);
-  2. store them in the replay buffer (lac_rllib/constrained/off_policy.py);
+  2. store them in the replay buffer (lac_rllib/families/off_policy/algorithm.py);
   3. ν update (eq. 14) from the episodes completed in this batch, inside the Learner, before
   4. one pass of minibatches over the whole buffer in a single ``learner_group.update`` call
      (docs/dependencies.md, "Cost of an update call": each call costs ~0.1 s, so not one call per minibatch).
@@ -16,7 +16,7 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.config import LACConfig
 from lac_rllib.constrained.metrics import TS_ITERATION, TS_MEAN_EPISODE_COST
-from lac_rllib.constrained.off_policy import OffPolicySafeAlgorithm
+from lac_rllib.families.off_policy.algorithm import OffPolicySafeAlgorithm
 
 
 class LAC(OffPolicySafeAlgorithm):

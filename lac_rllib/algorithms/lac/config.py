@@ -34,11 +34,11 @@ from lac_rllib.constrained.fields import (
 )
 from lac_rllib.constrained.lagrange import FixedMultiplierParams
 from lac_rllib.constrained.networks import ACTIVATIONS
-from lac_rllib.constrained.off_policy_config import OffPolicyConfig
 from lac_rllib.constrained.precision import DTYPE_CHOICES as LANGEVIN_DTYPES
 from lac_rllib.constrained.precision import resolve_dtype
 from lac_rllib.constrained.search_space import Searched
 from lac_rllib.constrained.task_config import SafeTaskParams
+from lac_rllib.families.off_policy.config import OffPolicyConfig
 
 CHAIN_AT = ("next", "current")
 LR_SCHEDULES = ("linear", "constant")

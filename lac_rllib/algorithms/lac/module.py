@@ -23,10 +23,10 @@ from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
-from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
 from lac_rllib.constrained.lagrange import initial_nu
 from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 from lac_rllib.constrained.precision import resolve_dtype
+from lac_rllib.families.off_policy.module import ActorCriticRLModule
 
 # Keys of the forward_train output, declared once.
 Q_PRED = "q_pred"  # (E, B) online Q(s, a), rows [:n_reward] reward critics

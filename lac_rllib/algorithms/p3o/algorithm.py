@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from lac_rllib.algorithms.p3o.config import P3OConfig
-from lac_rllib.constrained.on_policy import OnPolicySafeAlgorithm
+from lac_rllib.families.on_policy.algorithm import OnPolicySafeAlgorithm
 
 
 class P3O(OnPolicySafeAlgorithm):

@@ -17,8 +17,11 @@ from typing import Any
 
 from lac_rllib.constrained import fields, metrics
 from lac_rllib.constrained.fields import INT_GE_1, NON_NEGATIVE, POSITIVE, one_of, or_none, param
-from lac_rllib.constrained.on_policy_config import OMNISAFE_BUDGET, ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyParams
-from lac_rllib.constrained.search_space import POLICY_LR, Searched, lr
+from lac_rllib.constrained.search_space import Searched
+from lac_rllib.families.on_policy.config import OMNISAFE_BUDGET, ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyParams
+
+#: The learner's own result keys, beside the on-policy family's (lac_rllib/constrained/metrics.py).
+COST_PENALTY = "cost_penalty"  # P3O: κ·ReLU(mean(r·A^C) + Ĵ_C − b), last minibatch
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 
@@ -57,11 +60,11 @@ class P3OConfig(OnPolicyConfig):
     OMNISAFE_NAME = "P3O"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = P3OParams, fields.FieldSet(P3OParams, "P3O"), PRESETS
     SEARCH_SPACE = {
-        "lr": lr(POLICY_LR),
+        "lr": OnPolicyConfig.SEARCH_SPACE["lr"],
         "kappa": Searched("loguniform", "Zhang et al. 2022 (P3O) study the penalty factor κ's sensitivity",
                           around=5.0),
-        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+        "clip_param": OnPolicyConfig.SEARCH_SPACE["clip_param"],
     }
-    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.COST_PENALTY)
+    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, COST_PENALTY)
     ALGORITHM_CLASS = "lac_rllib.algorithms.p3o.algorithm.P3O"
     LEARNER_CLASS = "lac_rllib.algorithms.p3o.learner.P3OTorchLearner"

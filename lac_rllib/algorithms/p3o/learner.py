@@ -19,9 +19,10 @@ from __future__ import annotations
 import torch
 from ray.rllib.core.columns import Columns
 
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import COST_PENALTY, NU
-from lac_rllib.constrained.on_policy_learner import OnPolicyTorchLearner
+from lac_rllib.algorithms.p3o.config import COST_PENALTY
+from lac_rllib.constrained.metrics import NU
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.on_policy.learner import OnPolicyTorchLearner
 
 
 def p3o_penalty(ratio: torch.Tensor, cost_advantages: torch.Tensor, cost_gap: float, kappa: float,

@@ -1,7 +1,7 @@
 """PCPOConfig: Projection-based Constrained Policy Optimization (Yang et al. 2020) on CPO's house.
 
 PCPO takes the reward's TRPO step and projects it onto the linearised cost constraint's
-half-space (its eq. 7; learner.py, constrained/trust_region.py ``pcpo_step``), with CPO's
+half-space (its eq. 7; learner.py, families/trust_region/step.py ``pcpo_step``), with CPO's
 quantities (g, b, H⁻¹g, H⁻¹b, c) and its cost-aware line search. No multiplier.
 
 Source tags: [O] OmniSafe PCPO (configs/on-policy/PCPO.yaml, second_order/pcpo.py), [P] the PCPO
@@ -16,11 +16,11 @@ import dataclasses
 from typing import Any
 
 from lac_rllib.algorithms.cpo import config as cpo
-from lac_rllib.algorithms.cpo.config import CostStepParams, CPOConfig
-from lac_rllib.constrained import fields, metrics
+from lac_rllib.algorithms.cpo.config import CPO_CASE, CostStepParams, CPOConfig
+from lac_rllib.constrained import fields
 from lac_rllib.constrained.fields import INT_GE_1, one_of, or_none, param
-from lac_rllib.constrained.search_space import Searched, lr
-from lac_rllib.constrained.trust_region_config import OMNISAFE_STEP
+from lac_rllib.constrained.search_space import lr
+from lac_rllib.families.trust_region.config import OMNISAFE_STEP
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "omnisafe")
 PROJECTIONS = ("omnisafe", "kl", "l2")
@@ -63,10 +63,9 @@ class PCPOConfig(CPOConfig):
     OMNISAFE_NAME = "PCPO"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = PCPOParams, fields.FieldSet(PCPOParams, "PCPO"), PRESETS
     SEARCH_SPACE = {
-        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
-        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
+        **CPOConfig.SEARCH_SPACE,
         "critic_lr": lr("[O] the critics' lr (PCPO's cost critic sets its projection)"),
     }
-    REPORTED_KEYS = tuple(k for k in CPOConfig.REPORTED_KEYS if k != metrics.CPO_CASE)  # no cases
+    REPORTED_KEYS = tuple(k for k in CPOConfig.REPORTED_KEYS if k != CPO_CASE)  # no cases
     ALGORITHM_CLASS = "lac_rllib.algorithms.pcpo.algorithm.PCPO"
     LEARNER_CLASS = "lac_rllib.algorithms.pcpo.learner.PCPOTorchLearner"

@@ -1,5 +1,5 @@
 """PCPOTorchLearner: CPO's learner with PCPO's step. Source tags: [P] Yang et al. 2020, eq. 7;
-[O] OmniSafe pcpo.py ``_update_actor``. The maths is constrained/trust_region.py's ``pcpo_step``.
+[O] OmniSafe pcpo.py ``_update_actor``. The maths is families/trust_region/step.py's ``pcpo_step``.
 
 With CPO's g, b, x = H⁻¹g, p = H⁻¹b and c (cpo/learner.py), the step is the reward's TRPO step
 projected onto {Δ: c + bᵀΔ ≤ 0} (``projection``: the KL metric [P], the Euclidean one, or
@@ -12,7 +12,7 @@ projection's coefficient, 0 when the reward's step is feasible.
 from __future__ import annotations
 
 from lac_rllib.algorithms.cpo.learner import CPOTorchLearner
-from lac_rllib.constrained.trust_region import pcpo_step
+from lac_rllib.families.trust_region.step import pcpo_step
 
 
 class PCPOTorchLearner(CPOTorchLearner):

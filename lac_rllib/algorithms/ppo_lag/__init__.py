@@ -1,3 +1,3 @@
-"""PPO-Lagrangian = the on-policy base of constrained/ (on_policy*.py, cost_gae.py) + the Lagrange
-multiplier (constrained/lagrangian_learner.py) + PPO's clip: OmniSafe's PPOLag by default, the
+"""PPO-Lagrangian = the on-policy base (families/on_policy/: its learner, cost GAE) + the Lagrange
+multiplier (families/on_policy/lagrangian.py) + PPO's clip: OmniSafe's PPOLag by default, the
 paper's PPO-L (safety-starter-agents) as the ``ssa`` preset. FOCOPS, CUP and RESPO build on it."""

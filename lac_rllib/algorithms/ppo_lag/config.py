@@ -1,4 +1,4 @@
-"""PPOLagConfig: PPO-Lagrangian = the on-policy base (constrained/on_policy_config.py) + the Lagrange
+"""PPOLagConfig: PPO-Lagrangian = the on-policy base (families/on_policy/config.py) + the Lagrange
 multiplier + PPO's clip. Source tags: [O] OmniSafe PPOLag (configs/on-policy/PPOLag.yaml), [S]
 safety-starter-agents PPO-L (pg/run_agent.py, the paper's PPO-L, App. D), [D] ours. The defaults
 are [O]'s; the ``ssa`` preset is [S]'s.
@@ -11,8 +11,8 @@ from typing import Any
 
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.fields import POSITIVE, one_of, or_none, param
-from lac_rllib.constrained.on_policy_config import ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyLagParams
-from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, Searched, lr
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, Searched, lr
+from lac_rllib.families.on_policy.config import ON_POLICY_PRESETS, OnPolicyConfig, OnPolicyLagParams
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny", "ssa")
 
@@ -63,9 +63,9 @@ class PPOLagConfig(OnPolicyConfig):
     OMNISAFE_NAME = "PPOLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = PPOLagParams, fields.FieldSet(PPOLagParams, "PPO-Lag"), PRESETS
     SEARCH_SPACE = {
-        "lr": lr(POLICY_LR),
+        "lr": OnPolicyConfig.SEARCH_SPACE["lr"],
         "lagrangian_lr": lr(MULTIPLIER_LR),
-        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+        "clip_param": OnPolicyConfig.SEARCH_SPACE["clip_param"],
         "target_kl": Searched("loguniform", "[O] 0.01 or 0.02 across its presets: a factor 3 either side",
                               around=3.0),
     }

@@ -32,8 +32,12 @@ from lac_rllib.constrained.fields import (
     or_none,
     param,
 )
-from lac_rllib.constrained.on_policy_config import ACTIVATIONS, NU_PARAMETRIZATIONS, OnPolicyLagParams
-from lac_rllib.constrained.search_space import MULTIPLIER_LR, POLICY_LR, lr
+from lac_rllib.constrained.search_space import lr
+from lac_rllib.families.on_policy.config import ACTIVATIONS, NU_PARAMETRIZATIONS, OnPolicyLagParams
+
+#: The learner's own result keys, beside the on-policy family's (lac_rllib/constrained/metrics.py).
+REACH_VF_LOSS = "reach_vf_loss"  # RESPO: masked mean (V_p − p-target)², last minibatch
+REACH_PROB_MEAN = "reach_prob_mean"  # RESPO: mean V_p(s) over the batch at collection
 
 PRESET_NAMES = ("mujoco", "safety_gym", "tiny")
 P_INIT = 0.25  # [G] penalty_param = 0.25, ν = softplus(p)
@@ -141,11 +145,11 @@ class RESPOConfig(PPOLagConfig):
     ALGO = "respo"
     PARAMS, FIELDS, PRESETS = RESPOParams, fields.FieldSet(RESPOParams, "RESPO"), PRESETS
     SEARCH_SPACE = {
-        "lr": lr(POLICY_LR),
-        "lagrangian_lr": lr(MULTIPLIER_LR),
+        "lr": PPOLagConfig.SEARCH_SPACE["lr"],
+        "lagrangian_lr": PPOLagConfig.SEARCH_SPACE["lagrangian_lr"],
         "reach_critic_lr": lr("RESPO's authors' code: its reachability critic learns on a timescale of its own"),
     }
-    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, metrics.REACH_VF_LOSS, metrics.REACH_PROB_MEAN)
+    REPORTED_KEYS = (*metrics.PPO_LAG_KEYS, REACH_VF_LOSS, REACH_PROB_MEAN)
     ALGORITHM_CLASS = "lac_rllib.algorithms.respo.algorithm.RESPO"
     RL_MODULE_CLASS = "lac_rllib.algorithms.respo.module.RESPOTorchRLModule"
     LEARNER_CLASS = "lac_rllib.algorithms.respo.learner.RESPOTorchLearner"

@@ -31,11 +31,12 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
+from lac_rllib.algorithms.respo.config import REACH_PROB_MEAN, REACH_VF_LOSS
 from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, ReachTargets
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.lagrange import LagrangeMultiplier
-from lac_rllib.constrained.metrics import NU, REACH_PROB_MEAN, REACH_VF_LOSS
-from lac_rllib.constrained.on_policy_learner import COST_CRITIC, CRITIC, POLICY
+from lac_rllib.constrained.metrics import NU
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.on_policy.learner import COST_CRITIC, CRITIC, POLICY
 
 REACH_CRITIC = "reach_critic"  # the 4th optimizer's name
 

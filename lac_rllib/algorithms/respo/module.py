@@ -14,7 +14,7 @@ import torch
 from ray.rllib.core.columns import Columns
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.constrained.on_policy_module import CostCritic, OnPolicyTorchRLModule
+from lac_rllib.families.on_policy.module import CostCritic, OnPolicyTorchRLModule
 
 
 class ReachCritic(CostCritic):

@@ -18,7 +18,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.sac_lag.config import SACLagConfig
 from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
 from lac_rllib.constrained.minibatch_loop import update_kwargs
-from lac_rllib.constrained.off_policy import OffPolicySafeAlgorithm
+from lac_rllib.families.off_policy.algorithm import OffPolicySafeAlgorithm
 
 
 class SACLag(OffPolicySafeAlgorithm):

@@ -34,10 +34,10 @@ from lac_rllib.constrained.fields import (
 from lac_rllib.constrained.lagrange import FixedMultiplierParams
 from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
 from lac_rllib.constrained.networks import ACTIVATIONS
-from lac_rllib.constrained.off_policy_config import OffPolicyConfig
 from lac_rllib.constrained.precision import DTYPE_CHOICES, resolve_dtype
 from lac_rllib.constrained.search_space import MULTIPLIER_LR, lr
 from lac_rllib.constrained.task_config import SafeTaskParams
+from lac_rllib.families.off_policy.config import OffPolicyConfig
 
 LAGRANGIAN_RULES = ("adam", "gradient")
 #: critic_dtype="auto" runs bfloat16 only on critics at least this wide: below, the casts cost

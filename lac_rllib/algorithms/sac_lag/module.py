@@ -26,10 +26,10 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.sac_lag.config import critic_matmul_dtype
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
-from lac_rllib.constrained.actor_critic_module import ActorCriticRLModule
 from lac_rllib.constrained.lagrange import initial_nu
 from lac_rllib.constrained.networks import CriticEnsemble
 from lac_rllib.constrained.precision import TORCH_DTYPES
+from lac_rllib.families.off_policy.module import ActorCriticRLModule
 
 # Keys of the forward outputs, declared once.
 Q_REWARD = "q_reward"  # (2, B) Q_R1, Q_R2 at (s, a)

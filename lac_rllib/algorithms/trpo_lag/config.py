@@ -1,4 +1,4 @@
-"""TRPOLagConfig: TRPO-Lagrangian = the trust-region base (constrained/trust_region_config.py) + the
+"""TRPOLagConfig: TRPO-Lagrangian = the trust-region base (families/trust_region/config.py) + the
 Lagrange multiplier. Source tags: [O] OmniSafe TRPOLag (configs/on-policy/TRPOLag.yaml,
 naive_lagrange/trpo_lag.py), [S] safety-starter-agents TRPO-L (pg/run_agent.py: the paper's TRPO-L,
 App. D), [D] ours. The defaults are [O]'s; the ``ssa`` preset is [S]'s.
@@ -11,9 +11,9 @@ from typing import Any
 
 from lac_rllib.constrained import fields
 from lac_rllib.constrained.fields import one_of, or_none, param
-from lac_rllib.constrained.on_policy_config import OnPolicyLagParams
-from lac_rllib.constrained.search_space import MULTIPLIER_LR, Searched, lr
-from lac_rllib.constrained.trust_region_config import (
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, lr
+from lac_rllib.families.on_policy.config import OnPolicyLagParams
+from lac_rllib.families.trust_region.config import (
     SSA_TRUST_REGION,
     TRUST_REGION_PRESETS,
     TrustRegionConfig,
@@ -50,10 +50,10 @@ class TRPOLagConfig(TrustRegionConfig):
     OMNISAFE_NAME = "TRPOLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = TRPOLagParams, fields.FieldSet(TRPOLagParams, "TRPO-Lag"), PRESETS
     SEARCH_SPACE = {
-        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
-        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
+        "target_kl": TrustRegionConfig.SEARCH_SPACE["target_kl"],
+        "cg_damping": TrustRegionConfig.SEARCH_SPACE["cg_damping"],
         "lagrangian_lr": lr(MULTIPLIER_LR),
-        "critic_lr": lr("[O] the critics' lr, 1e-3 everywhere: a decade either side"),
+        "critic_lr": TrustRegionConfig.SEARCH_SPACE["critic_lr"],
     }
     ALGORITHM_CLASS = "lac_rllib.algorithms.trpo_lag.algorithm.TRPOLag"
     LEARNER_CLASS = "lac_rllib.algorithms.trpo_lag.learner.TRPOLagTorchLearner"

@@ -14,7 +14,9 @@ from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
 from lac_rllib.algorithms.cpo import config as C
 from lac_rllib.algorithms.cpo import learner as L
-from lac_rllib.constrained.metrics import COST_GAP, CPO_CASE, LINE_SEARCH_FRACTION, NU, TS_EPISODE_COSTS
+from lac_rllib.algorithms.cpo.config import COST_GAP, CPO_CASE
+from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
+from lac_rllib.families.trust_region.config import LINE_SEARCH_FRACTION
 from lac_rllib.tasks import get_task
 
 TASK = "lac/PointHazard-v0"  # cost limit 2, action (2,)

@@ -20,7 +20,7 @@ import torch
 from scipy.optimize import minimize_scalar
 
 from lac_rllib.algorithms.cpo.config import CPOConfig
-from lac_rllib.constrained.trust_region import cpo_step
+from lac_rllib.families.trust_region.step import cpo_step
 from tests.algorithms.golden import assert_matches, load
 from tests.algorithms.golden_trust_region import scenario_outputs, trust_region_step
 

@@ -16,10 +16,10 @@ from lac_rllib.algorithms.cup import learner as cup_learner
 from lac_rllib.algorithms.cup.row_index import ROW_INDEX
 from lac_rllib.algorithms.ppo_lag.config import PPOLagConfig
 from lac_rllib.constrained import metrics
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.metrics import TS_EPISODE_COSTS
 from lac_rllib.constrained.minibatch_loop import update_kwargs
-from lac_rllib.constrained.projection import kl_to_reference
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.on_policy.projection import kl_to_reference
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"  # obs (1,), action (1,); the episodes below are built by hand
@@ -35,7 +35,7 @@ def test_defaults_are_cup_yaml():
     tiny = C.CUPConfig.build("lac/PointHazard-v0", 0, {"projection_epochs": 3}, timesteps=1000)
     assert (tiny.stage2_epochs, tiny.num_epochs, tiny.target_kl) == (3, 10, 0.02)  # the tiny preset's KL stop
     assert set(C.PRESETS) == set(C.PRESET_NAMES) == {"mujoco", "safety_gym", "tiny", "omnisafe"}
-    assert {metrics.PROJECTION_LOSS, metrics.PROJECTION_EPOCHS, metrics.PROJECTION_KL} <= set(C.CUPConfig.REPORTED_KEYS)
+    assert {C.PROJECTION_LOSS, C.PROJECTION_EPOCHS, C.PROJECTION_KL} <= set(C.CUPConfig.REPORTED_KEYS)
     docs = C.CUPConfig.FIELDS.docs()
     assert set(docs) == C.CUPConfig.FIELDS.names and all(docs.values())
 
@@ -160,7 +160,7 @@ def test_critics_stay_still_in_stage_two(switch, path):
     assert all(not torch.equal(init_critics[k], critics[k]) for k in critics)  # stage 1 trained them
     assert all(torch.equal(critics[k], end_critics[k]) for k in critics), "a critic moved in stage 2"
     assert any(not torch.equal(policy[k], end_policy[k]) for k in policy)  # stage 2 trained the policy
-    assert result[MID][metrics.PROJECTION_EPOCHS] == 2  # no KL stop: every epoch of stage 2
+    assert result[MID][C.PROJECTION_EPOCHS] == 2  # no KL stop: every epoch of stage 2
 
 
 @pytest.mark.parametrize("path", PATHS)
@@ -192,5 +192,5 @@ def test_cup_trains_and_reports_its_keys(ray_session, minibatch_size):
     row = metrics.iteration_row(result, C.CUPConfig.REPORTED_KEYS)
     assert set(C.CUPConfig.REPORTED_KEYS) <= set(row), set(C.CUPConfig.REPORTED_KEYS) - set(row)
     assert all(math.isfinite(row[k]) for k in C.CUPConfig.REPORTED_KEYS), row
-    assert 1 <= row[metrics.PROJECTION_EPOCHS] <= 2 and row[metrics.PROJECTION_KL] >= 0
+    assert 1 <= row[C.PROJECTION_EPOCHS] <= 2 and row[C.PROJECTION_KL] >= 0
     assert 0 <= result[LEARNER_RESULTS][MID][metrics.NU] <= 2.0  # nu_max

@@ -12,10 +12,10 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
 
-from lac_rllib.algorithms.cup.config import CUPConfig
+from lac_rllib.algorithms.cup.config import PROJECTION_LOSS, CUPConfig
 from lac_rllib.algorithms.cup.learner import Projection
 from lac_rllib.algorithms.cup.row_index import ROW_INDEX
-from lac_rllib.constrained.metrics import COST_VF_LOSS, PROJECTION_LOSS
+from lac_rllib.constrained.metrics import COST_VF_LOSS
 from tests.algorithms.golden import (
     OMNISAFE_ON_POLICY,
     assert_matches,

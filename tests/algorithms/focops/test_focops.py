@@ -11,8 +11,8 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.algorithms.focops.config import FOCOPSConfig
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.metrics import TS_EPISODE_COSTS
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"  # obs (1,), action (1,)

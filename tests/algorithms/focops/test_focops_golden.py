@@ -11,7 +11,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
 from lac_rllib.algorithms.focops.config import FOCOPSConfig
-from lac_rllib.constrained.projection import gaussian_kl
+from lac_rllib.families.on_policy.projection import gaussian_kl
 from tests.algorithms.golden import assert_matches, build_on_policy, load, on_policy_batch, on_policy_step
 
 

@@ -11,9 +11,9 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.algorithms import registry
-from lac_rllib.algorithms.p3o.config import P3OConfig
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import COST_PENALTY, NU, TS_EPISODE_COSTS
+from lac_rllib.algorithms.p3o.config import COST_PENALTY, P3OConfig
+from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"

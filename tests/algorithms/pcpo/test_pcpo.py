@@ -13,10 +13,11 @@ from ray.rllib.core import COMPONENT_RL_MODULE, DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
+from lac_rllib.algorithms.cpo.config import COST_GAP
 from lac_rllib.algorithms.pcpo import config as C
 from lac_rllib.algorithms.pcpo import learner as L
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import COST_GAP, NU, TS_EPISODE_COSTS
+from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 from lac_rllib.tasks import get_task
 
 TASK = "lac/PointHazard-v0"  # cost limit 2, action (2,)

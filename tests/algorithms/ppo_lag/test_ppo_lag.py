@@ -15,11 +15,11 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.algorithms import registry
 from lac_rllib.algorithms.ppo_lag import config as C
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, cost_gae
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.lagrange import AdamStep, LagrangeMultiplier, SoftplusAdamStep
 from lac_rllib.constrained.metrics import EPOCHS_TRAINED, NU, TS_EPISODE_COSTS
-from lac_rllib.constrained.on_policy_learner import COST_CRITIC, CRITIC, POLICY
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, cost_gae
+from lac_rllib.families.on_policy.learner import COST_CRITIC, CRITIC, POLICY
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"  # obs (1,), action (1,); the episodes below are built by hand

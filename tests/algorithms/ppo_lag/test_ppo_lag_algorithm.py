@@ -23,7 +23,7 @@ from lac_rllib.constrained.metrics import (
     NU,
     TS_EPISODE_COSTS,
 )
-from lac_rllib.constrained.on_policy_learner import COST_CRITIC, CRITIC, POLICY
+from lac_rllib.families.on_policy.learner import COST_CRITIC, CRITIC, POLICY
 
 PROBE = "lac/CostProbe-v0"  # cost of step t = 2t + 1, obs = t, reward = −t, 7-step episodes
 

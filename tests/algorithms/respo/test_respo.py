@@ -13,9 +13,10 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.metrics import LEARNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from lac_rllib.algorithms.respo import config as C
+from lac_rllib.algorithms.respo.config import REACH_PROB_MEAN, REACH_VF_LOSS
 from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, reach_targets
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import NU, REACH_PROB_MEAN, REACH_VF_LOSS, TS_EPISODE_COSTS, iteration_row
+from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS, iteration_row
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 from lac_rllib.tasks import get_task
 
 PROBE = "lac/CostProbe-v0"  # obs (1,), action (1,); the episodes below are built by hand

@@ -25,10 +25,10 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.learner import POLICY_LOSS_KEY, VF_LOSS_KEY
 
-from lac_rllib.algorithms.respo.config import RESPOConfig
+from lac_rllib.algorithms.respo.config import REACH_VF_LOSS, RESPOConfig
 from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, reach_targets
 from lac_rllib.constrained.costs import COSTS
-from lac_rllib.constrained.metrics import COST_VF_LOSS, REACH_VF_LOSS, TS_EPISODE_COSTS
+from lac_rllib.constrained.metrics import COST_VF_LOSS, TS_EPISODE_COSTS
 from tests.algorithms.golden import assert_matches, load, minibatch_step, on_policy_batch
 from tests.algorithms.golden_sources import RESPO_AUTHORS, build, in_reference_names
 

@@ -13,16 +13,11 @@ from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.algorithms.trpo_lag import config as C
-from lac_rllib.constrained import trust_region_learner as L
 from lac_rllib.constrained.costs import completed_episode_stats
-from lac_rllib.constrained.metrics import (
-    KL_FULL_BATCH,
-    LINE_SEARCH_BACKTRACKS,
-    LINE_SEARCH_FRACTION,
-    NU,
-    TS_EPISODE_COSTS,
-)
-from lac_rllib.constrained.trust_region import flat_params
+from lac_rllib.constrained.metrics import KL_FULL_BATCH, NU, TS_EPISODE_COSTS
+from lac_rllib.families.trust_region import learner as L
+from lac_rllib.families.trust_region.config import LINE_SEARCH_BACKTRACKS, LINE_SEARCH_FRACTION
+from lac_rllib.families.trust_region.step import flat_params
 from lac_rllib.tasks import get_task
 
 TASK = "lac/PointHazard-v0"  # obs (7,), action (2,): δ on RLlib's summed KL is 2·target_kl

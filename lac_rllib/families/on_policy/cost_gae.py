@@ -72,7 +72,7 @@ class CostGAE(ConnectorV2):
 
     It keeps the observations, behaviour-policy inputs and mask of the last batch it completed
     (``last_batch``: module id → those columns): the learner's KL early stop measures the policy's
-    drift on the whole batch (on_policy_learner.py). A learner that needs more of the whole batch (the
+    drift on the whole batch (learner.py). A learner that needs more of the whole batch (the
     trust-region step: actions, log-probabilities, both advantages) sets ``kept_columns``."""
 
     #: The columns of the whole batch ``last_batch`` keeps (the KL early stop's).

@@ -2,7 +2,7 @@
 
 The policy takes one trust-region step per iteration on the whole batch (Schulman et al. 2015:
 the natural gradient by conjugate gradient, scaled onto KL = δ, then a backtracking line search;
-trust_region_learner.py) instead of Adam's minibatch epochs; the critics keep theirs. Everything
+learner.py) instead of Adam's minibatch epochs; the critics keep theirs. Everything
 else is the on-policy base's: the module (π, V_R, V_C, ν), the cost GAE, Ĵ_C, the training step.
 :class:`TrustRegionParams` are the fields the family shares.
 
@@ -18,7 +18,13 @@ from typing import Any
 
 from lac_rllib.constrained import metrics
 from lac_rllib.constrained.fields import BOOL, FRACTION, INT_GE_1, NON_NEGATIVE, POSITIVE, one_of, or_none, param
-from lac_rllib.constrained.on_policy_config import OnPolicyConfig, OnPolicyParams
+from lac_rllib.constrained.search_space import Searched, lr
+from lac_rllib.families.on_policy.config import OnPolicyConfig, OnPolicyParams
+
+#: The family's own result keys: one step of the policy per iteration, whose KL(π_old ‖ π) over
+#: the batch afterwards is KL_FULL_BATCH.
+LINE_SEARCH_FRACTION = "line_search_fraction"  # the fraction of the full step kept; 0: none accepted, θ_old kept
+LINE_SEARCH_BACKTRACKS = "line_search_backtracks"  # fractions rejected before the accepted one (all if none)
 
 KL_CONVENTIONS = ("sum", "mean")
 
@@ -115,13 +121,19 @@ TRUST_REGION_PRESETS: dict[str, dict[str, Any]] = {
 #: What each iteration's row reports beside the top-level keys: PPO-Lag's but its epoch count (the
 #: KL after the step is kl_full_batch), and the line search's outcome.
 TRUST_REGION_KEYS = (metrics.POLICY_LOSS, metrics.VF_LOSS, metrics.COST_VF_LOSS, metrics.COST_WINDOW_MEAN,
-                     metrics.KL_FULL_BATCH, metrics.LINE_SEARCH_FRACTION, metrics.LINE_SEARCH_BACKTRACKS)
+                     metrics.KL_FULL_BATCH, LINE_SEARCH_FRACTION, LINE_SEARCH_BACKTRACKS)
 
 
 class TrustRegionConfig(OnPolicyConfig):
     """The trust-region family's config: TRPO-Lag's, CPO's and PCPO's extend it."""
 
     REPORTED_KEYS = TRUST_REGION_KEYS
+    #: The family's searched fields (not the on-policy base's: the policy takes no lr nor clip).
+    SEARCH_SPACE = {
+        "target_kl": Searched("loguniform", "[O] the trust region δ, 0.01 or 0.02 across presets", around=3.0),
+        "cg_damping": lr("docs/baselines.md: the references' damping conventions differ act_dim× (trust-region KL)"),
+        "critic_lr": lr("[O] the critics' lr, 1e-3 everywhere: a decade either side"),
+    }
 
     @classmethod
     def benchmark_fields(cls, benchmark: str, steps: int) -> dict:

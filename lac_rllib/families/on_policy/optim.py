@@ -10,7 +10,7 @@ float32): every seeded run would change. :class:`ForeachAdam` is ``torch.optim.A
 ``state_dict``, defaults) whose step does the loop's arithmetic (``_single_tensor_adam``, torch
 2.13, ``amsgrad``, ``maximize``, weight decay and ``capturable`` off) with ``torch._foreach_*``
 ops: bit for bit the same weights and moments, float or tensor rate
-(tests/constrained/test_optim.py).
+(tests/families/on_policy/test_optim.py).
 
 Plain torch, no RLlib.
 """

@@ -15,7 +15,6 @@ from __future__ import annotations
 import torch
 from ray.rllib.evaluation.postprocessing import Postprocessing
 
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
 from lac_rllib.constrained.lagrange import (
     AdamStep,
     FixedBound,
@@ -25,14 +24,15 @@ from lac_rllib.constrained.lagrange import (
     fixed_multiplier,
     restore_multipliers,
 )
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 
 #: The mixin's entry in the learner's checkpointed state: module id → its multiplier's state.
 STATE_KEY = "lagrange"
 
 
 class LagrangianLearner:
-    """Mixed in before an :class:`~lac_rllib.constrained.on_policy_learner.OnPolicyTorchLearner`
-    (or a learner on it); the config has :class:`~lac_rllib.constrained.on_policy_config.OnPolicyLagParams`."""
+    """Mixed in before an :class:`~lac_rllib.families.on_policy.learner.OnPolicyTorchLearner`
+    (or a learner on it); the config has :class:`~lac_rllib.families.on_policy.config.OnPolicyLagParams`."""
 
     def build(self) -> None:
         super().build()

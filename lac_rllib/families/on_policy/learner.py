@@ -1,7 +1,7 @@
 """OnPolicyTorchLearner: the on-policy family's learner (PPO-Lag, P3O, FOCOPS, CUP, RESPO, and the
-trust-region base, constrained/trust_region_learner.py): RLlib's PPO learner with a cost critic, the
+trust-region base, families/trust_region/learner.py): RLlib's PPO learner with a cost critic, the
 cost GAE, the cost window Ĵ_C, PPO's clipped surrogate and the KL early stop. No multiplier: PPO-Lag
-adds one (constrained/lagrangian_learner.py), P3O a penalty. Source tags: [O] OmniSafe PPO /
+adds one (families/on_policy/lagrangian.py), P3O a penalty. Source tags: [O] OmniSafe PPO /
 PPOLag, [S] safety-starter-agents PPO-L, [R] RLlib.
 
 One ``learner_group.update`` call is one iteration (what OmniSafe calls an epoch; an *epoch* below is
@@ -31,7 +31,7 @@ Two paths to the same update, bit for bit (``update_path``; tests/algorithms/tes
 inside one ``_update`` (constrained/minibatch_loop.py) and makes each step in fewer calls: RLlib's
 loss terms computed here with their statistics on the reported minibatch only, the critics' L2
 gradient added in closed form, the networks' clips and Adam steps each in one pass of foreach ops
-(constrained/gradients.py, constrained/optim.py): 1.7x faster at 64-row minibatches (docs/speed.md).
+(constrained/gradients.py, families/on_policy/optim.py): 1.7x faster at 64-row minibatches (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -56,7 +56,6 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 from ray.rllib.utils.torch_utils import explained_variance
 
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
 from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norms_, zero_non_finite_
 from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, declared with every other)
@@ -68,7 +67,8 @@ from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, d
     TS_EPISODE_COSTS,
 )
 from lac_rllib.constrained.minibatch_loop import FusedMinibatchLoop
-from lac_rllib.constrained.optim import ForeachAdam, step_adams
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
+from lac_rllib.families.on_policy.optim import ForeachAdam, step_adams
 
 POLICY, CRITIC, COST_CRITIC = "policy", "critic", "cost_critic"  # optimizer names, one per network
 #: The learner's own entry in its checkpointed state (RLlib's keeps the module, optimizers, metrics).
@@ -154,7 +154,7 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
 
     def on_cost_window(self, module_id, j_c: float | None) -> None:
         """What Ĵ_C of this iteration does before the gradient steps (a multiplier's step: PPO-Lag's,
-        lagrangian_learner.py); nothing here. None: no episode completed yet."""
+        lagrangian.py); nothing here. None: no episode completed yet."""
 
     # ----- losses -----
     #: Whether RLlib's own PPO loss is this learner's on RLlib's update path (PPO-Lag sets it: the
@@ -185,7 +185,7 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
 
     def policy_advantages(self, config, module, batch) -> torch.Tensor:
         """The advantage the policy's surrogate weighs, per row: A^R [O PPO._compute_adv_surrogate]
-        (a multiplier's learner weighs A^C in: lagrangian_learner.py)."""
+        (a multiplier's learner weighs A^C in: lagrangian.py)."""
         return batch[Postprocessing.ADVANTAGES]
 
     def policy_loss(self, module_id, config, module, batch, logits, logp, advantages, masked_mean):
@@ -373,7 +373,7 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
             epochs = epochs if progress.stopped_after is None else min(progress.stopped_after, epochs)
             self.metrics.log_dict({EPOCHS_TRAINED: epochs, KL_FULL_BATCH: progress.kl}, key=mid, window=1)
 
-    # ----- state: the cost windows (a multiplier's rule beside them: lagrangian_learner.py) -----
+    # ----- state: the cost windows (a multiplier's rule beside them: lagrangian.py) -----
     @override(PPOTorchLearner)
     def get_state(self, *args, **kwargs):
         state = super().get_state(*args, **kwargs)

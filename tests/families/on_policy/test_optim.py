@@ -1,11 +1,11 @@
-"""ForeachAdam (lac_rllib/constrained/optim.py) is torch.optim.Adam's per-tensor loop, bit for bit."""
+"""ForeachAdam (lac_rllib/families/on_policy/optim.py) is torch.optim.Adam's per-tensor loop, bit for bit."""
 
 import copy
 
 import pytest
 import torch
 
-from lac_rllib.constrained.optim import ForeachAdam, step_adams
+from lac_rllib.families.on_policy.optim import ForeachAdam, step_adams
 
 
 def _nets(seed=0):

@@ -1,9 +1,9 @@
-"""constrained/projection.py: the KL to a reference policy and FOCOPS's indicator."""
+"""families/on_policy/projection.py: the KL to a reference policy and FOCOPS's indicator."""
 
 import torch
 from ray.rllib.core.distribution.torch.torch_distribution import TorchDiagGaussian
 
-from lac_rllib.constrained.projection import gaussian_kl, kl_to_reference, within
+from lac_rllib.families.on_policy.projection import gaussian_kl, kl_to_reference, within
 
 
 def test_the_closed_form_gaussian_kl_is_rllibs_bit_for_bit_with_its_gradient():

@@ -1,8 +1,8 @@
-"""TrustRegionTorchLearner: the on-policy base (on_policy_learner.py) whose policy takes one
+"""TrustRegionTorchLearner: the on-policy base (families/on_policy/learner.py) whose policy takes one
 trust-region step per iteration: TRPO on :meth:`policy_advantages` (A^R; TRPO-Lag's multiplier
 weighs A^C in), CPO and PCPO replace :meth:`policy_step`. Source tags: [O] OmniSafe natural_pg.py,
 trpo.py, trpo_lag.py; [S] safety-starter-agents agents.py ``TRPOAgent``; [TRPO] Schulman et al.
-2015, App. C. The maths is constrained/trust_region.py's.
+2015, App. C. The maths is families/trust_region/step.py's.
 
 One ``update`` call is one iteration. Ĵ_C first (and with a multiplier ν's step on it [O
 TRPOLag._update]), then, at the update's first loss call (the batch exists only once the learner
@@ -18,7 +18,7 @@ TRPOLag._compute_adv_surrogate]):
     Δθ = √(2δ/xᵀHx)·x, then θ_old + c^j·Δθ for the first j whose KL̄ ≤ δ and L ≤ L(θ_old),
     θ_old if none is                                                          [O _search_step_size; S update_pi]
 
-δ = target_kl·act_dim with kl_per_action_dim (trust_region_config.py); with kl_convention="mean" the KL is
+δ = target_kl·act_dim with kl_per_action_dim (config.py); with kl_convention="mean" the KL is
 averaged over the action's dimensions [O] and δ = target_kl. The critics then take their Adam
 minibatch epochs in the same call (the base's loop, fused or RLlib's), the policy's per-row loss
 there being nothing; there is no KL early stop.
@@ -34,10 +34,10 @@ from ray.rllib.core.distribution.torch.torch_distribution import TorchDiagGaussi
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.constrained.cost_gae import COST_ADVANTAGES
-from lac_rllib.constrained.metrics import LINE_SEARCH_BACKTRACKS, LINE_SEARCH_FRACTION
-from lac_rllib.constrained.on_policy_learner import EpochProgress, OnPolicyTorchLearner, gaussian_logp
-from lac_rllib.constrained.trust_region import (
+from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
+from lac_rllib.families.on_policy.learner import EpochProgress, OnPolicyTorchLearner, gaussian_logp
+from lac_rllib.families.trust_region.config import LINE_SEARCH_BACKTRACKS, LINE_SEARCH_FRACTION
+from lac_rllib.families.trust_region.step import (
     LineSearchResult,
     conjugate_gradient,
     fisher_vector_product,

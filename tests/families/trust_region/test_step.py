@@ -1,4 +1,4 @@
-"""The shared trust-region step (lac_rllib/constrained/trust_region.py): CG on an SPD system, the
+"""The shared trust-region step (lac_rllib/families/trust_region/step.py): CG on an SPD system, the
 Fisher-vector product against an explicit Hessian of the mean KL (and blind to phantom rows), the
 line search's accept/reject and bit-for-bit restore, CPO's dual against a brute-force 2-D quadratic
 programme in each case (an exact enumeration of the feasible set's boundary), and PCPO's
@@ -13,7 +13,7 @@ import torch
 from scipy.optimize import minimize
 from torch.func import functional_call
 
-from lac_rllib.constrained.trust_region import (
+from lac_rllib.families.trust_region.step import (
     conjugate_gradient,
     cpo_acceptance,
     cpo_step,

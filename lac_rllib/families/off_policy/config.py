@@ -1,4 +1,4 @@
-"""OffPolicyConfig: the config of an OffPolicySafeAlgorithm (lac_rllib/constrained/off_policy.py),
+"""OffPolicyConfig: the config of an OffPolicySafeAlgorithm (lac_rllib/families/off_policy/algorithm.py),
 which samples ``env_steps_per_iteration`` env steps into a replay buffer each iteration and trains
 on minibatches cut from the whole buffer in one update call.
 

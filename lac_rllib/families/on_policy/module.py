@@ -7,7 +7,7 @@ critic and the multiplier ν (0 for ever in the algorithms without one: P3O, CPO
   (``vf_share_layers=False``) [O, S];
 - ``cost_vf``: the cost critic V_C, a third MLP of that shape, built by the same RLlib catalog;
 - ``nu``: the Lagrange multiplier ν, a buffer (it travels with the weights into checkpoints and
-  to the env runners). Only a learner's ``LagrangeMultiplier`` writes it (lagrangian_learner.py).
+  to the env runners). Only a learner's ``LagrangeMultiplier`` writes it (lagrangian.py).
 
 Only the policy (and ν) exist on env runners: both critics are non-inference attributes.
 """

@@ -43,6 +43,7 @@ from lac_rllib.constrained.fields import (
 )
 from lac_rllib.constrained.lagrange import FixedMultiplierParams, initial_nu
 from lac_rllib.constrained.minibatch_loop import UPDATE_PATHS
+from lac_rllib.constrained.search_space import POLICY_LR, Searched, lr
 from lac_rllib.constrained.task_config import SafeTaskConfig, SafeTaskParams
 
 POLICY_LR_SCHEDULES = ("linear", "constant")
@@ -186,7 +187,12 @@ class OnPolicyConfig(SafeTaskConfig, PPOConfig):
     CLI, the sweep and lac-eval is here, inherited."""
 
     REPORTED_KEYS = metrics.PPO_LAG_KEYS
-    RL_MODULE_CLASS = "lac_rllib.constrained.on_policy_module.OnPolicyTorchRLModule"
+    #: The family's searched fields, which each algorithm takes and adds its own to (in its order).
+    SEARCH_SPACE = {
+        "lr": lr(POLICY_LR),
+        "clip_param": Searched("uniform", "Andrychowicz et al. 2021: PPO's clip 0.1-0.3", (0.1, 0.3)),
+    }
+    RL_MODULE_CLASS = "lac_rllib.families.on_policy.module.OnPolicyTorchRLModule"
     #: The mean action, or a draw from π (lac_rllib/evaluation.py ACTION_MODES).
     ACTIONS = ("generator", "stochastic")
     SPEED_FIELDS = frozenset({"num_envs_per_env_runner", "torch_threads", "update_path"})

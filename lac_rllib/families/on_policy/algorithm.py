@@ -5,12 +5,12 @@ The MRO is OnPolicySafeAlgorithm → SafeAlgorithm → PPO → Algorithm: SafeAl
 and ``restore_from_path`` call ``super()``, which PPO does not override, so they wrap
 Algorithm's; PPO contributes its config and training step. The training step is RLlib's PPO
 step (ppo.py, new stack, env-step counting) with two additions: the costs of the episodes
-completed in the batch go to the learner (Ĵ_C, on_policy_learner.py), and the top-level results
+completed in the batch go to the learner (Ĵ_C, learner.py), and the top-level results
 (episode return and cost, ν, feasibility) are logged. One iteration:
 
   1. sample ``train_batch_size_per_learner`` env steps with the current policy;
   2. one ``learner_group.update``: Ĵ_C (and a multiplier's step), then the cost GAE and
-     ``num_epochs`` epochs of minibatches (on_policy_learner.py);
+     ``num_epochs`` epochs of minibatches (learner.py);
   3. the new weights (and ν) to the env runners.
 
 OmniSafe and safety-starter-agents reset their envs every epoch, dropping the episode cut at an
