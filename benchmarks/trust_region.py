@@ -57,7 +57,7 @@ def main(argv=None) -> int:
 
     from lac_rllib.algorithms.trpo_lag.config import TRPOLagConfig
     from lac_rllib.algorithms.trpo_lag.learner import COST_ADVANTAGES, PolicyOnBatch
-    from lac_rllib.constrained.trust_region import conjugate_gradient, fisher_vector_product, flat_grad
+    from lac_rllib.families.trust_region.step import conjugate_gradient, fisher_vector_product, flat_grad
     from lac_rllib.tasks import get_task
 
     torch.set_num_threads(1)
