@@ -263,8 +263,9 @@ MIN_FRONTIER_SEEDS = 3
 def best_within(points: pd.DataFrame, limit: float) -> dict:
     """R*(b) from the frontier's per-seed scores (``points``: nu, seed, return, cost): among the ν
     feasible by the rule on the choosing seeds, the one of the best mean return there; R*(b) is its
-    mean return on the held-out seeds, ``r_star_scores`` those seeds' returns. ``why`` says in one
-    line why there is no R*(b) (too few seeds, no feasible point)."""
+    mean return on the held-out seeds, ``r_star_scores`` those seeds' returns, provided the rule holds
+    on those seeds too. ``why`` says in one line why there is no R*(b) (too few seeds, no feasible
+    point, the chosen ν infeasible on its held-out seeds)."""
     none = {"r_star": math.nan, "r_star_nu": "", "r_star_scores": np.array([]), "why": ""}
     if points.empty:
         return none | {"why": "no frontier ran"}
@@ -283,7 +284,14 @@ def best_within(points: pd.DataFrame, limit: float) -> dict:
             best, best_mean = nu, float(r.mean())
     if best is None:
         return none | {"why": f"no fixed ν is feasible within b = {limit:g} on the frontier's choosing seeds"}
-    held = ret[measuring & (nus == best)]
+    measured = measuring & (nus == best)
+    held = ret[measured]
+    if held.size and not configuration_feasible(cost[measured], limit):
+        # The one rule on the seeds that measure R*(b) too: a return the chosen ν does not reach
+        # within b on fresh seeds is no feasible reference for a regret.
+        k, n = feasible_seeds(cost[measured], limit)
+        return none | {"r_star_nu": best, "why": f"ν = {best}, chosen on half the seeds, fails the rule on the "
+                                                  f"held-out ones ({k} of {n} within b = {limit:g})"}
     return {"r_star": float(np.mean(held)) if held.size else math.nan, "r_star_nu": best, "r_star_scores": held,
             "why": "" if held.size else "the chosen ν has no held-out seed"}
 

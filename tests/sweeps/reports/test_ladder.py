@@ -47,6 +47,19 @@ def test_r_star_is_chosen_on_half_the_seeds_and_measured_on_the_rest():
     assert math.isnan(none["r_star"]) and "no fixed ν is feasible within b = 0.5" in none["why"]
 
 
+def test_no_r_star_where_the_chosen_nu_fails_the_rule_on_its_held_out_seeds():
+    """R*(b) is a feasible reference only if the ν chosen on half the seeds is feasible on the seeds
+    that measure it too: ν 4 within b = 5 on seeds 0-1 (cost 3), over it on seeds 2-3, gives none."""
+    seeds = ladder.frontier_seeds(trials())
+    seeds.loc[(seeds["nu"] == "4") & (seeds["seed"] >= 2), "cost"] = 7.0
+    star = ladder.best_within(seeds, 5)
+    assert math.isnan(star["r_star"]) and star["r_star_nu"] == "4" and not len(star["r_star_scores"])
+    assert star["why"] == "ν = 4, chosen on half the seeds, fails the rule on the held-out ones (0 of 2 within b = 5)"
+    seeds.loc[(seeds["nu"] == "4") & (seeds["seed"] == 3), "cost"] = 3.0  # 1 of 2 within: still below 80%
+    assert math.isnan(ladder.best_within(seeds, 5)["r_star"])
+    assert ladder.best_within(seeds, 15)["r_star"] == 6  # ν 1, feasible on every seed: unchanged
+
+
 def test_the_per_seed_rule_decides_rank_regret_wins_and_the_choice():
     table = ladder.ladder_table(trials()).set_index(["algo", "cost_limit"])
     assert table["return_mean"].to_dict() == pytest.approx(
