@@ -19,7 +19,8 @@ one pass over the iteration's batch):
    its own gradient-norm clip (RLlib's ``grad_clip`` is per optimizer) [O max_grad_norm];
 4. the KL early stop [O]: after each epoch, KL(π_old ‖ π) over the whole batch; once it exceeds
    ``target_kl``, the remaining minibatches no longer step the policy (nor the critics, when
-   ``kl_stop_critics``; then their backward pass is skipped too), or, with ``kl_stop_late`` [S],
+   ``kl_stop_critics``; then those minibatches are skipped whole, :meth:`skip_minibatch`, as
+   OmniSafe breaks out of its epochs), or, with ``kl_stop_late`` [S],
    those after one more epoch. The check runs before the first
    minibatch that starts past an epoch's last row: RLlib's MiniBatchCyclicIterator fills every
    minibatch, so one that straddles an epoch's end trains before the check (OmniSafe's last
