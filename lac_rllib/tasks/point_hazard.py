@@ -11,6 +11,12 @@ hazard (episode cost ≈ 7 > the limit 2), so an unconstrained agent violates th
 steps (LAC with ν ends at cost 0, return ≈ 0.3). A random policy does not reach the goal
 (return ≈ −10) and drifts into the hazard now and then.
 
+``lac/PointTwoCosts-v0`` is the same task with two constraints (tests of several constraints): the
+hazard disc (``info["cost_hazard"]``, as above) and a lane (``info["cost_lane"]`` = 1 on a step
+that ends above the x axis, y > 0: a random policy pays ~50 an episode, one that keeps below the
+axis 0, at little cost in return); ``info["cost"]`` is their sum. Which one binds is the limits'
+choice.
+
 Also ``lac/CostProbe-v0``: a diagnostic task whose cost is a known function of the step
 (cost = 2·t + 1 at step t, the observation carries t), to check cost/row alignment.
 """
@@ -22,6 +28,7 @@ import math
 import gymnasium as gym
 import numpy as np
 
+from lac_rllib.tasks.constraints import Constraint
 from lac_rllib.tasks.registry import TINY, TaskSpec, register
 
 GOAL = (1.0, 0.0)
@@ -72,6 +79,16 @@ class PointHazardEnv(gym.Env):
         return self._obs(), reward, reached, truncated, {"cost": cost}
 
 
+class PointTwoCostsEnv(PointHazardEnv):
+    """PointHazard with a second cost, the lane: ``cost_hazard`` and ``cost_lane`` apart, ``cost`` their sum."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        lane = float(self._y > 0.0)
+        info = {"cost_hazard": info["cost"], "cost_lane": lane, "cost": info["cost"] + lane}
+        return obs, reward, terminated, truncated, info
+
+
 class CostProbeEnv(gym.Env):
     """Cost of step t is 2t + 1, reward is −t; obs = [t]; episodes of ``length`` steps."""
 
@@ -97,6 +114,10 @@ def make_point_hazard(env_config: dict) -> gym.Env:
     return PointHazardEnv(**{k: v for k, v in env_config.items() if k in ("max_steps", "hazard_radius")})
 
 
+def make_point_two_costs(env_config: dict) -> gym.Env:
+    return PointTwoCostsEnv(**{k: v for k, v in env_config.items() if k in ("max_steps", "hazard_radius")})
+
+
 def make_cost_probe(env_config: dict) -> gym.Env:
     return CostProbeEnv(**{k: v for k, v in env_config.items() if k in ("length",)})
 
@@ -105,6 +126,12 @@ POINT_HAZARD = register(TaskSpec(
     id="lac/PointHazard-v0", factory=f"{__name__}:make_point_hazard", cost_limit=2.0,
     episode_cost_discount=1.0, preset=TINY, obs_dim=7, act_dim=2,
     cost_source='info["cost"] = 1 inside the hazard disc', episode_steps=100,
+))
+POINT_TWO_COSTS = register(TaskSpec(
+    id="lac/PointTwoCosts-v0", factory=f"{__name__}:make_point_two_costs", cost_limit=20.0,
+    episode_cost_discount=1.0, preset=TINY, obs_dim=7, act_dim=2,
+    cost_source='info["cost"] = hazard + lane (lac/PointHazard-v0 plus 1 per step above the x axis)',
+    episode_steps=100, constraints=(Constraint("hazard", ("cost_hazard",)), Constraint("lane", ("cost_lane",))),
 ))
 COST_PROBE = register(TaskSpec(
     id="lac/CostProbe-v0", factory=f"{__name__}:make_cost_probe", cost_limit=1e9,

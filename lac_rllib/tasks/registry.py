@@ -16,6 +16,8 @@ from typing import Any, Callable
 
 import gymnasium as gym
 
+from lac_rllib.tasks.constraints import Constraint, as_constraints
+
 #: Preset names understood by ``LACConfig.preset`` (docs/spec.md §5 columns).
 MUJOCO, SAFETY_GYM, TINY = "mujoco", "safety_gym", "tiny"
 #: How a task with a batched backend steps its envs (the ``env_backend`` field of every algorithm).
@@ -68,6 +70,14 @@ class TaskSpec:
     #: A navigation task's robot (``Point``, ``Car``, ...; empty for others): a Point task also runs
     #: Safety-Gym's Point (``robot_variant``, lac_rllib/tasks/point_robot.py).
     robot: str = dataclasses.field(default="", compare=False)
+    #: The parts of its safety specification, each a name and the ``info`` keys of its cost
+    #: (lac_rllib/tasks/constraints.py): what ``constraints: {NAME: limit}`` may name. Empty: the
+    #: task has only ``info["cost"]``.
+    constraints: tuple[Constraint, ...] = ()
+
+    def __post_init__(self):
+        # A spec that travelled as plain data (a user task's definition) carries them as dicts.
+        object.__setattr__(self, "constraints", as_constraints(self.constraints))
 
     def make(self, env_config: dict | None = None) -> gym.Env:
         """Build one env instance (works in any process)."""

@@ -49,6 +49,7 @@ import gymnasium as gym
 import numpy as np
 
 from lac_rllib.tasks import light_resets, point_robot
+from lac_rllib.tasks.constraints import Constraint
 from lac_rllib.tasks.registry import MUJOCO, SAFETY_GYM, TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.safety_gym:make_env"
@@ -226,6 +227,23 @@ NAV_COSTS: dict[str, str] = {
     "Run0": "outside |x| <= 0.5",
 }
 
+#: The constraints each navigation task declares (``TaskSpec.constraints``): its constrained
+#: obstacles, each with the ``cost_*`` keys safety_gymnasium's ``calculate_cost`` writes for it
+#: (assets/*: ``cal_cost``), an indicator each as ``info["cost"]`` is.
+_HAZARDS = Constraint("hazards", ("cost_hazards",), indicator=True)
+_BOUNDARY = Constraint("boundary", ("cost_out_of_boundary",), indicator=True)
+NAV_CONSTRAINTS: dict[str, tuple[Constraint, ...]] = {
+    "Goal1": (_HAZARDS,),
+    "Goal2": (_HAZARDS, Constraint("vases", ("cost_vases_contact", "cost_vases_velocity"), indicator=True)),
+    **{f"Button{level}": (_HAZARDS, Constraint("gremlins", ("cost_gremlins",), indicator=True),
+                          Constraint("buttons", ("cost_buttons",), indicator=True)) for level in (1, 2)},
+    "Push1": (_HAZARDS,),
+    "Push2": (_HAZARDS, Constraint("pillars", ("cost_pillars",), indicator=True)),
+    "Circle1": (_BOUNDARY,),
+    "Circle2": (_BOUNDARY,),
+    "Run0": (_BOUNDARY,),
+}
+
 #: safety_gymnasium registers Circle and Run with 500-step episodes (its task classes'
 #: ``num_steps`` = 500 too); every other task runs 1000 steps.
 NAV_EPISODE_STEPS: dict[str, int] = {"Circle": 500, "Run": 500}
@@ -289,6 +307,7 @@ def _nav(robot: str, task: str) -> TaskSpec:
         episode_steps=episode_steps(env_id),
         batched=supports(robot, task),
         robot=robot,
+        constraints=NAV_CONSTRAINTS.get(task, ()),
     )
 
 
@@ -305,6 +324,7 @@ def _vel(robot: str) -> TaskSpec:
         act_dim=act_dim,
         cost_source=f"safety_gymnasium velocity v1 indicator {indicator}, summed",
         kwargs={"env_id": env_id},
+        constraints=(Constraint("velocity", ("cost",)),),
     )
 
 

@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from lac_rllib.errors import announce, cut, excerpt
+from lac_rllib.tasks.constraints import Constraint
 from lac_rllib.tasks.registry import TaskSpec, register
 
 FACTORY = "lac_rllib.tasks.user:make_env"
@@ -24,11 +25,12 @@ FACTORY = "lac_rllib.tasks.user:make_env"
 
 class CostFromInfo(gym.Wrapper):
     """The user's env with its step cost copied from ``info[cost_key]`` into ``info["cost"]`` (a
-    float: where every algorithm reads it), observations as float32."""
+    float: where every algorithm reads it), observations as float32. An env that declares
+    constraints and has no ``cost_key`` gets the sum of its constraints' keys there."""
 
-    def __init__(self, env: gym.Env, cost_key: str):
+    def __init__(self, env: gym.Env, cost_key: str, constraint_keys: tuple[str, ...] = ()):
         super().__init__(env)
-        self.cost_key = cost_key
+        self.cost_key, self.constraint_keys = cost_key, tuple(constraint_keys)
         box = env.observation_space
         self.observation_space = gym.spaces.Box(box.low.astype(np.float32), box.high.astype(np.float32),
                                                 dtype=np.float32)
@@ -39,14 +41,16 @@ class CostFromInfo(gym.Wrapper):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if self.cost_key not in info:
+        if self.cost_key not in info and self.constraint_keys and all(k in info for k in self.constraint_keys):
+            info = {**info, "cost": float(sum(float(info[k]) for k in self.constraint_keys))}
+        elif self.cost_key not in info:
             raise KeyError(f"the env's step info has no {self.cost_key!r} (keys: {sorted(info)}); "
                            "a safe task reports its step cost there")
         info = {**info, "cost": float(info[self.cost_key])}
         return np.asarray(obs, dtype=np.float32), float(reward), bool(terminated), bool(truncated), info
 
 
-_OWN_KEYS = ("factory", "gym_id", "cost_key", "module_path", "num_envs")
+_OWN_KEYS = ("factory", "gym_id", "cost_key", "constraint_keys", "module_path", "num_envs")
 
 
 def _module_of(cfg: dict) -> str | None:
@@ -92,13 +96,15 @@ def _inner(cfg: dict) -> gym.Env:
 def make_env(env_config: dict | None = None) -> gym.Env:
     """Build the user's env (any process): the TaskSpec's kwargs name the factory or id and the cost key."""
     cfg = dict(env_config or {})
-    return CostFromInfo(_inner(cfg), cfg.get("cost_key", "cost"))
+    return CostFromInfo(_inner(cfg), cfg.get("cost_key", "cost"), tuple(cfg.get("constraint_keys") or ()))
 
 
-def check_env(env: gym.Env, cost_key: str, what: str, steps: int = 5) -> tuple[int, int]:
+def check_env(env: gym.Env, cost_key: str, what: str, steps: int = 5,
+              constraints: dict[str, str] | None = None) -> tuple[int, int]:
     """(obs_dim, act_dim) of an env the algorithms can train on, or a ValueError saying why not:
     not a gymnasium env, spaces that are not flat Boxes, a reset or step that raises or returns
-    something else than gymnasium's tuples, or a step whose info holds no cost."""
+    something else than gymnasium's tuples, or a step whose info holds no cost (``cost_key``, or
+    where it declares ``constraints`` (name → info key), each of their keys)."""
     if not isinstance(env, gym.Env):
         raise ValueError(f"{what}: the factory returned {excerpt(env)} (a {type(env).__name__}); "
                          "accepted: a gymnasium.Env")
@@ -112,12 +118,19 @@ def check_env(env: gym.Env, cost_key: str, what: str, steps: int = 5) -> tuple[i
         out = _call(what, "step(action)", env.step, env.action_space.sample())
         _, _, terminated, truncated, info = _returns(what, "step(action)", out, 5,
                                                      "(obs, reward, terminated, truncated, info)")
-        if not isinstance(info, dict) or cost_key not in info:
-            keys = sorted(map(str, info)) if isinstance(info, dict) else f"not a dict: {excerpt(info)}"
-            raise ValueError(f"{what}: its step info has no {cost_key!r} (keys: {keys or 'none'}); "
-                             f"accepted: an env that reports the step's cost in info[{cost_key!r}] (or name the key: "
-                             "cost_key)")
-        _call(what, f"float(info[{cost_key!r}])", float, info[cost_key])
+        keys = sorted(map(str, info)) if isinstance(info, dict) else f"not a dict: {excerpt(info)}"
+        for name, key in (constraints or {}).items():
+            if not isinstance(info, dict) or key not in info:
+                raise ValueError(f"{what}: its step info has no {key!r}, the key of constraint {name!r} (keys: "
+                                 f"{keys or 'none'}); accepted: constraints naming keys its step info has")
+            _call(what, f"float(info[{key!r}])", float, info[key])
+        # With constraints and no cost_key, info["cost"] is the sum of their keys (CostFromInfo).
+        if not (constraints and cost_key not in info):
+            if not isinstance(info, dict) or cost_key not in info:
+                raise ValueError(f"{what}: its step info has no {cost_key!r} (keys: {keys or 'none'}); accepted: "
+                                 f"an env that reports the step's cost in info[{cost_key!r}] (or name the key: "
+                                 "cost_key)")
+            _call(what, f"float(info[{cost_key!r}])", float, info[cost_key])
         if terminated or truncated:
             _call(what, "reset()", env.reset)
     return int(env.observation_space.shape[0]), int(env.action_space.shape[0])
@@ -139,12 +152,16 @@ def _returns(what: str, call: str, out, n: int, shape: str):
 
 def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = None, cost_limit: float,
               episode_cost_discount: float = 1.0, cost_key: str = "cost", preset: str = "mujoco",
-              kwargs: dict | None = None, search_dirs: tuple[str, ...] = ()) -> TaskSpec:
+              kwargs: dict | None = None, search_dirs: tuple[str, ...] = (),
+              constraints: dict[str, str] | None = None) -> TaskSpec:
     """The TaskSpec of a user's env, after building it once and stepping it (``check_env``); registered.
-    Its module is imported from the Python path, else from the first of ``search_dirs`` holding it."""
+    Its module is imported from the Python path, else from the first of ``search_dirs`` holding it.
+    ``constraints`` (name → the info key of its step cost) are the constraints a run may set limits on."""
     source = factory or gym_id
     announce(f"building and stepping your env {source} (task {task_id})")
     env_kwargs = {"factory": factory, "gym_id": gym_id, "cost_key": cost_key, **(kwargs or {})}
+    if constraints:
+        env_kwargs["constraint_keys"] = list(constraints.values())
     module = _module_of(env_kwargs)
     if module:
         env_kwargs["module_path"] = locate(module, list(search_dirs))
@@ -153,7 +170,7 @@ def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = 
     except Exception as e:  # an import error, a bad id, the user's own exception: say which env
         raise ValueError(f"task {source}: cannot be built ({type(e).__name__}: {cut(str(e))})") from None
     try:
-        obs_dim, act_dim = check_env(inner, cost_key, f"task {source}")
+        obs_dim, act_dim = check_env(inner, cost_key, f"task {source}", constraints=constraints)
     except ValueError:
         if isinstance(inner, gym.Env):
             try:
@@ -167,6 +184,7 @@ def user_task(task_id: str, *, factory: str | None = None, gym_id: str | None = 
         id=task_id, factory=FACTORY, cost_limit=float(cost_limit), episode_cost_discount=float(episode_cost_discount),
         preset=preset, obs_dim=obs_dim, act_dim=act_dim, cost_source=f"info[{cost_key!r}] of {source}",
         kwargs=env_kwargs, **({"episode_steps": int(limit)} if limit else {}),
+        constraints=tuple(Constraint(name, (key,)) for name, key in (constraints or {}).items()),
     ))
 
 

@@ -13,6 +13,7 @@ import pytest
 
 from lac_rllib.algorithms.lac.config import LACConfig
 from lac_rllib.tasks import TaskSpec, get_task, known_tasks, safety_gym, safety_gym_compat
+from lac_rllib.tasks.constraints import Constraint
 
 DOCS_TASKS = Path(__file__).resolve().parents[2] / "docs" / "tasks.md"
 
@@ -252,11 +253,13 @@ def test_original_seven_task_specs_unchanged():
     def nav(env_id, obs, hazards, family):
         return TaskSpec(env_id, safety_gym.FACTORY, 25.0, 1.0, "safety_gym", obs, 2,
                         f'safety_gymnasium info["cost"] in {{0,1}} ({hazards}), summed',
-                        {"env_id": env_id}, family)
+                        {"env_id": env_id}, family,
+                        constraints=safety_gym.NAV_CONSTRAINTS[f"{family}1"])  # the constraints came later
 
     def vel(env_id, obs, act, indicator):
         return TaskSpec(env_id, safety_gym.FACTORY, 25.0, 1.0, "mujoco", obs, act,
-                        f"safety_gymnasium velocity v1 indicator {indicator}, summed", {"env_id": env_id})
+                        f"safety_gymnasium velocity v1 indicator {indicator}, summed", {"env_id": env_id},
+                        constraints=(Constraint("velocity", ("cost",)),))
 
     button = "hazards, gremlins, wrong buttons"
     expected = [
