@@ -29,6 +29,7 @@ from lac_rllib.constrained.metrics import (
     EPISODES_THIS_ITER,
     FEASIBLE,
     NU,
+    per_constraint,
 )
 from lac_rllib.constrained.task_config import register_task_env
 from lac_rllib.tasks import user as user_tasks
@@ -66,6 +67,9 @@ class SafeAlgorithm(Algorithm):
             register_task_env(config.task_spec)
         super().setup(config)
         self._last_episode_stats = (float("nan"), float("nan"))
+        #: With several constraints: each constraint's mean cost over the last iteration that
+        #: completed an episode (NaN before one did).
+        self._last_constraint_costs = [float("nan")] * config.num_constraints
 
     @override(Algorithm)
     def get_metadata(self) -> dict:
@@ -123,14 +127,27 @@ class SafeAlgorithm(Algorithm):
         self.env_runner_group.foreach_env_runner(reseed, local_env_runner=True)
         self.learner_group.foreach_learner(lambda learner: update_global_seed_if_necessary("torch", seed))
 
-    def log_top_level(self, returns: list[float], costs: list[float]) -> None:
+    def log_top_level(self, returns: list[float], costs: list[float], constraint_costs=()) -> None:
         """episode_return / episode_cost: means over the episodes completed this iteration
         (the last known values carry over an iteration in which none completed); ν is the
-        default module's, as its learner logged it."""
+        default module's, as its learner logged it. With several constraints (``constraint_costs``:
+        each completed episode's K costs), also each constraint's cost and limit
+        (``episode_cost/NAME``, ``cost_limit/NAME``), and ``feasible`` is every constraint within
+        its limit: episode_cost is then the summed cost ``info["cost"]``, cost_limit the limits' sum."""
         if returns:
             self._last_episode_stats = (float(np.mean(returns)), float(np.mean(costs)))
+        if len(constraint_costs):
+            self._last_constraint_costs = np.mean(constraint_costs, axis=0).tolist()
         ret, cost = self._last_episode_stats
         limit = self.config.effective_cost_limit
+        several = self.config.constraint_set
+        if several is not None and len(several) > 1:
+            for name, c, b in zip(several.names, self._last_constraint_costs, several.limits):
+                self.metrics.log_value(per_constraint(EPISODE_COST, name), c, window=1)
+                self.metrics.log_value(per_constraint(COST_LIMIT, name), b, window=1)
+            within = float(all(c <= b for c, b in zip(self._last_constraint_costs, several.limits)))
+        else:
+            within = float(cost <= limit)
         nu = self.metrics.peek((LEARNER_RESULTS, DEFAULT_MODULE_ID, NU), default=float("nan"))
         steps = self.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0)
         # The training's cost so far, a lifetime sum in RLlib's metrics (checkpointed with them).
@@ -138,7 +155,7 @@ class SafeAlgorithm(Algorithm):
         total = self.metrics.peek(COST_TOTAL, default=0.0)
         for key, value in {
             EPISODE_RETURN: ret, EPISODE_COST: cost, COST_LIMIT: limit,
-            FEASIBLE: float(cost <= limit), NU: float(nu), EPISODES_THIS_ITER: len(returns),
+            FEASIBLE: within, NU: float(nu), EPISODES_THIS_ITER: len(returns),
             ENV_STEPS: steps, COST_RATE: float(total) / steps if steps else float("nan"),
         }.items():
             self.metrics.log_value(key, value, window=1)

@@ -5,6 +5,12 @@ Every task reports a step's cost in ``info["cost"]`` (lac_rllib.tasks). RLlib ca
 its episodes; the pieces here turn them into (a) a ``costs`` column aligned row by row with
 rewards and next observations, (b) the episode cost Ĵ_C per the task's convention (summed or
 discounted with γ_C), which drives ν (eq. 14) and the reported metrics.
+
+A run with ``constraints`` (lac_rllib/tasks/constraints.py) reads each constraint's cost from its
+own info keys instead: with one constraint the column and Ĵ_C are that constraint's, shaped as
+above; with K > 1 the column is (B, K) and each episode also carries its K costs
+(``CD_CONSTRAINT_COSTS``), the vector Ĵ_C of the K multipliers, beside the summed ``info["cost"]``
+the reports show.
 """
 
 from __future__ import annotations
@@ -16,7 +22,13 @@ from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.connectors.connector_v2 import ConnectorV2
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.constrained.metrics import CD_EPISODE_COST, CD_EPISODE_RETURN, EPISODE_COST_MEAN
+from lac_rllib.constrained.metrics import (
+    CD_CONSTRAINT_COSTS,
+    CD_EPISODE_COST,
+    CD_EPISODE_RETURN,
+    EPISODE_COST_MEAN,
+)
+from lac_rllib.tasks.constraints import ConstraintSet
 
 COSTS = "costs"  # the train batch's cost column, row-aligned with rewards
 
@@ -39,7 +51,22 @@ class AddCostsFromInfos(ConnectorV2):
     misaligned), and right after ``AddColumnsFromEpisodesToTrainBatch`` in PPO's, which has no next
     observations (tests/algorithms/*/ check the alignment on ``lac/CostProbe-v0``). Infos index like
     observations (index 0 is the reset info), so the cost of step t is ``infos[t + 1]``.
+
+    ``constraints`` (``ConstraintSet.as_data()``; None: ``info["cost"]``): each row's costs of the
+    run's constraints, a number with one, a (K,) vector with several.
     """
+
+    def __init__(self, *args, constraints: dict | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.constraints = constraints
+        self._set = None if constraints is None else ConstraintSet.from_data(constraints)
+
+    def row_costs(self, infos) -> np.ndarray:
+        """The cost column's rows for ``infos``: (n,), or (n, K) with several constraints."""
+        if self._set is None:
+            return np.asarray([step_cost(i) for i in infos], dtype=np.float32)
+        rows = np.stack([self._set.step_costs(i) for i in infos]) if infos else np.zeros((0, len(self._set)))
+        return rows.astype(np.float32)[:, 0] if len(self._set) == 1 else rows.astype(np.float32)
 
     @override(ConnectorV2)
     def __call__(self, *, rl_module, batch, episodes, explore=None, shared_data=None, **kwargs) -> Any:
@@ -48,8 +75,7 @@ class AddCostsFromInfos(ConnectorV2):
         for episode in self.single_agent_episode_iterator(episodes, agents_that_stepped_only=False):
             infos = episode.get_infos(slice(1, len(episode) + 1))
             self.add_n_batch_items(
-                batch, COSTS,
-                items_to_add=np.asarray([step_cost(i) for i in infos], dtype=np.float32),
+                batch, COSTS, items_to_add=self.row_costs(infos),
                 num_items=len(episode), single_agent_episode=episode,
             )
         return batch
@@ -129,16 +155,34 @@ class EpisodeCostCallback(RLlibCallback):
         if env_runner.config.seed is not None:
             env.action_space.seed(env_runner.config.seed + env_runner.worker_index)
 
+    #: The run's constraints (None: ``info["cost"]``), read from the runner's config once.
+    _constraints: ConstraintSet | None | bool = False
+
+    def constraints(self, env_runner) -> ConstraintSet | None:
+        if self._constraints is False:
+            self._constraints = env_runner.config.constraint_set
+        return self._constraints
+
     @override(RLlibCallback)
-    def on_episode_start(self, *, episode, **kwargs) -> None:
+    def on_episode_start(self, *, episode, env_runner, **kwargs) -> None:
         episode.custom_data[CD_EPISODE_COST] = 0.0
         episode.custom_data[CD_EPISODE_RETURN] = 0.0
+        constraints = self.constraints(env_runner)
+        if constraints is not None and len(constraints) > 1:
+            episode.custom_data[CD_CONSTRAINT_COSTS] = np.zeros(len(constraints))
 
     @override(RLlibCallback)
     def on_episode_step(self, *, episode, env_runner, **kwargs) -> None:
         t = episode.t - 1  # global index of the step just taken
-        gamma_c = env_runner.config.effective_episode_cost_discount
-        episode.custom_data[CD_EPISODE_COST] += gamma_c**t * step_cost(episode.get_infos(-1))
+        weight = env_runner.config.effective_episode_cost_discount ** t
+        info, constraints = episode.get_infos(-1), self.constraints(env_runner)
+        if constraints is None:
+            episode.custom_data[CD_EPISODE_COST] += weight * step_cost(info)
+        elif len(constraints) == 1:  # the one constraint's cost, as info["cost"] otherwise
+            episode.custom_data[CD_EPISODE_COST] += weight * float(constraints.step_costs(info)[0])
+        else:  # each constraint's (its multiplier's Ĵ_C), and the summed cost the reports show
+            episode.custom_data[CD_CONSTRAINT_COSTS] += weight * constraints.step_costs(info)
+            episode.custom_data[CD_EPISODE_COST] += weight * step_cost(info)
         episode.custom_data[CD_EPISODE_RETURN] += float(episode.get_rewards(-1))
 
     @override(RLlibCallback)
@@ -150,3 +194,10 @@ def completed_episode_stats(episodes) -> tuple[list[float], list[float]]:
     """(returns, costs) of the episodes that ended in ``episodes`` (chunks from one sample)."""
     done = [e for e in episodes if e.is_done and CD_EPISODE_COST in e.custom_data]
     return ([e.custom_data[CD_EPISODE_RETURN] for e in done], [e.custom_data[CD_EPISODE_COST] for e in done])
+
+
+def completed_constraint_costs(episodes) -> list[list[float]]:
+    """Each constraint's cost of the episodes that ended in ``episodes`` (a K-list per episode, in
+    the order of :func:`completed_episode_stats`); empty where the run has one constraint."""
+    return [[float(c) for c in e.custom_data[CD_CONSTRAINT_COSTS]] for e in episodes
+            if e.is_done and CD_EPISODE_COST in e.custom_data and CD_CONSTRAINT_COSTS in e.custom_data]

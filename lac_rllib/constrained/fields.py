@@ -49,6 +49,9 @@ POSITIVE = Accepted("a finite number > 0", lambda v: _is_real(v) and v > 0)
 NON_NEGATIVE = Accepted("a finite number >= 0", lambda v: _is_real(v) and v >= 0)
 FRACTION = Accepted("a number in (0, 1]", lambda v: _is_real(v) and 0 < v <= 1)
 BOOL = Accepted("True | False", lambda v: isinstance(v, bool))
+LIMITS = Accepted("a non-empty mapping of constraint names to finite numbers >= 0",
+                  lambda v: isinstance(v, dict) and len(v) >= 1
+                  and all(isinstance(k, str) and _is_real(b) and b >= 0 for k, b in v.items()))
 LAYERS = Accepted("a non-empty sequence of integers >= 1",
                   lambda v: isinstance(v, (tuple, list)) and len(v) >= 1 and all(_is_int(h) and h >= 1 for h in v))
 

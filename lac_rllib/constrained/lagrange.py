@@ -230,6 +230,72 @@ class LagrangeMultiplier:
         self.bound.set_state(state["bound"])
 
 
+class Multipliers:
+    """The K multipliers ν_k of a module with K constraints, each its own
+    :class:`LagrangeMultiplier` (its rule, its bound, its state) on its entry of the module's (K,)
+    ν buffer, stepped on its own constraint's Ĵ_Ck against its own limit b_k: the Lagrangian of K
+    constraints, L = J_R − Σ_k ν_k·(J_Ck − b_k), is separable in the ν_k, so each dual step is
+    eq. (14) for its constraint alone (Achiam et al. 2017, §6.2, one dual variable per constraint).
+    One object with :class:`LagrangeMultiplier`'s interface where the learners use it."""
+
+    def __init__(self, value: torch.Tensor, limits, make):
+        """``make(value_k, b_k)`` builds constraint k's multiplier on ``value[k]``, a view of the buffer."""
+        self.parts = [make(value[k], float(b)) for k, b in enumerate(limits)]
+
+    def __len__(self) -> int:
+        return len(self.parts)
+
+    @property
+    def value(self) -> list[float]:
+        return [m.value for m in self.parts]
+
+    @property
+    def upper(self) -> list[float | None]:
+        return [m.upper for m in self.parts]
+
+    def bind(self, value: torch.Tensor) -> None:
+        for k, m in enumerate(self.parts):
+            m.bind(value[k])
+
+    def step(self, episode_costs) -> list[float]:
+        """Each ν_k's projected step on its Ĵ_Ck (``episode_costs``, K numbers; None: no step)."""
+        if episode_costs is not None:
+            for m, c in zip(self.parts, episode_costs, strict=True):
+                m.step(c)
+        return self.value
+
+    def get_state(self) -> dict:
+        return {"constraints": [m.get_state() for m in self.parts]}
+
+    def set_state(self, state: dict) -> None:
+        for m, saved in zip(self.parts, state["constraints"], strict=True):
+            m.set_state(saved)
+
+
+def multipliers_for(value: torch.Tensor, config, make) -> "LagrangeMultiplier | Multipliers":
+    """A module's multiplier: ``make(value, b)`` with one constraint, :class:`Multipliers` of
+    ``make(value[k], b_k)`` with K (the limits of ``config.constraint_set``)."""
+    several = getattr(config, "constraint_set", None)  # a config without constraints: one
+    if several is None or len(several) == 1:
+        return make(value, config.effective_cost_limit)
+    return Multipliers(value, several.limits, make)
+
+
+def each_multiplier(multiplier) -> list:
+    """The :class:`LagrangeMultiplier` of each constraint: ``[multiplier]`` with one, its parts with K."""
+    return multiplier.parts if isinstance(multiplier, Multipliers) else [multiplier]
+
+
+def nu_weighted(nu: torch.Tensor, cost: torch.Tensor) -> torch.Tensor:
+    """ν·x with one constraint (ν 0-d); Σ_k ν_k·x_k with K (ν (K,), x (..., K))."""
+    return nu * cost if nu.dim() == 0 else cost @ nu
+
+
+def nu_total(nu: torch.Tensor) -> torch.Tensor:
+    """ν, or Σ_k ν_k with K constraints (the 1 + Σν that normalises a Lagrangian advantage)."""
+    return nu if nu.dim() == 0 else nu.sum()
+
+
 def restore_multipliers(multipliers: dict, modules, saved: dict) -> None:
     """After a learner's ``set_state``: each module's multiplier bound again to the module's ν
     buffer (RLlib's restore replaced the module's tensors), then its rule's state from ``saved``
@@ -240,9 +306,10 @@ def restore_multipliers(multipliers: dict, modules, saved: dict) -> None:
         multipliers[mid].set_state(state)
 
 
-def fixed_multiplier(value: torch.Tensor, config) -> "LagrangeMultiplier | None":
-    """The multiplier of a run whose config sets ``nu_fixed`` (ν held at it, unbounded); None where
-    ν learns (the algorithm's own rule then)."""
+def fixed_multiplier(value: torch.Tensor, config) -> "LagrangeMultiplier | Multipliers | None":
+    """The multiplier of a run whose config sets ``nu_fixed`` (ν held at it, unbounded; each ν_k with
+    several constraints); None where ν learns (the algorithm's own rule then)."""
     if getattr(config, "nu_fixed", None) is None:
         return None
-    return LagrangeMultiplier(value, cost_limit=config.effective_cost_limit, rule=HeldStep(), bounded=False)
+    return multipliers_for(value, config, lambda v, b: LagrangeMultiplier(v, cost_limit=b, rule=HeldStep(),
+                                                                           bounded=False))

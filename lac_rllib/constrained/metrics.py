@@ -63,9 +63,23 @@ MUST_BE_FINITE = (CRITIC_LOSS, ACTOR_LOSS, NU)
 TS_MEAN_EPISODE_COST = "safe_mean_episode_cost"  # Ĵ_C of eq. (14): the batch's completed episodes; None if none
 TS_ITERATION = "safe_training_iteration"  # the algorithm's iteration k (0-based)
 TS_EPISODE_COSTS = "safe_episode_costs"  # the baselines: the costs of the episodes completed this iteration
+#: With several constraints, what the multipliers read instead: each completed episode's K costs
+#: (the on-policy and SAC-Lag windows), and LAC's Ĵ_C as a K-vector in ``TS_MEAN_EPISODE_COST``.
+TS_CONSTRAINT_COSTS = "safe_constraint_costs"
 
 # ----- episode.custom_data, accumulated on the env runners (they survive episode chunking) -----
 CD_EPISODE_COST, CD_EPISODE_RETURN = "safe_episode_cost", "safe_episode_return"
+CD_CONSTRAINT_COSTS = "safe_constraint_costs"  # with several constraints: the episode's cost of each
+
+
+#: The top-level keys that carry one constraint of several (``episode_cost/NAME``, ``cost_limit/NAME``).
+PER_CONSTRAINT_TOP = (f"{EPISODE_COST}/", f"{COST_LIMIT}/")
+
+
+def per_constraint(key: str, name: str) -> str:
+    """A metric's key for one constraint of several (``nu/hazards``, ``episode_cost/vases``)."""
+    return f"{key}/{name}"
+
 #: The env runners' metric: the episode cost over the last 100 episodes.
 EPISODE_COST_MEAN = "episode_cost_mean"
 
@@ -81,6 +95,9 @@ def iteration_row(result: dict, reported: tuple[str, ...] = (), module_id: str =
     row = {k: float(result[k]) for k in TOP_LEVEL_KEYS}
     learner = result.get(LEARNER_RESULTS, {}).get(module_id, {})
     row.update({k: float(learner[k]) for k in reported if k in learner})
+    # Several constraints: each one's cost and limit, and its multiplier (``per_constraint`` keys).
+    row.update({k: float(v) for k, v in result.items() if k.startswith(PER_CONSTRAINT_TOP)})
+    row.update({k: float(v) for k, v in learner.items() if k.startswith(f"{NU}/")})
     row[ITERATION] = int(result[TRAINING_ITERATION])
     return row
 

@@ -89,6 +89,12 @@ def cost_rows(q: torch.Tensor, n_reward: int) -> torch.Tensor:
     return q[n_reward:]
 
 
+def max_per_constraint(q_c: torch.Tensor, k: int) -> torch.Tensor:
+    """max_j Q_Ckj of each of K constraints from the cost rows (K·m, ...) → (K, ...): constraint k's
+    m critics are rows [k·m, (k+1)·m) (a critic ensemble with ``n_cost`` = K·m)."""
+    return q_c.reshape(k, -1, *q_c.shape[1:]).max(1).values
+
+
 def act_and_grad(name: str, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Activation value and its derivative at the pre-activation z (for the manual backward)."""
     if name == "mish":

@@ -22,9 +22,10 @@ from ray.tune.registry import register_env
 
 from lac_rllib.constrained.costs import EpisodeCostCallback
 from lac_rllib.constrained.cpus import OneThreadPerEnvRunner, set_runners
-from lac_rllib.constrained.fields import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, one_of, or_none, param
+from lac_rllib.constrained.fields import BOOL, FRACTION, LIMITS, NON_NEGATIVE, POSITIVE, one_of, or_none, param
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
+from lac_rllib.tasks.constraints import ConstraintSet, select
 from lac_rllib.tasks.point_robot import ROBOT_VARIANTS
 from lac_rllib.tasks.registry import ENV_BACKENDS
 
@@ -36,6 +37,11 @@ class SafeTaskParams:
     # --- task ---
     cost_limit: float | None = param(None, accepts=or_none(NON_NEGATIVE))
     """b; None = the task's limit (docs/spec.md §6)."""
+    constraints: dict | None = param(None, accepts=or_none(LIMITS))
+    """A limit per constraint of the task (name → b, e.g. {hazards: 10, vases: 5}; the task's
+    constraints: docs/tasks.md), each constraint's cost read apart and held under its own limit
+    (its own cost critic and multiplier); None = one constraint, ``cost_limit`` on the summed cost
+    ``info["cost"]``. Not with ``cost_limit``."""
     episode_cost_discount: float | None = param(None, accepts=or_none(FRACTION))
     """Discount of the per-step cost in Ĵ_C (1 = sum); None = the task's convention (docs/spec.md §6)."""
 
@@ -114,6 +120,9 @@ class SafeTaskConfig:
     #: Task family (``TaskSpec.family``, e.g. ``Button``) → the fields this algorithm sets there,
     #: on top of the preset (LAC's T = 50 on the Button tasks).
     TASK_FAMILY_OVERRIDES: dict[str, dict[str, Any]] = {}
+    #: Whether it trains on several constraints at once (``constraints`` with two or more limits):
+    #: a cost critic, advantage and multiplier per constraint. One constraint runs everywhere.
+    SEVERAL_CONSTRAINTS: bool = False
     #: The learner's values an iteration's row reports (lac_rllib/constrained/metrics.py names them).
     REPORTED_KEYS: tuple[str, ...] = ()
     #: The classes RLlib builds from this config, as class paths (RLlib's own form of a class in a
@@ -243,10 +252,20 @@ class SafeTaskConfig:
 
     @override(AlgorithmConfig)
     def validate(self) -> None:
-        """RLlib's checks, then every field's, then that a cost limit is set (the task's or cost_limit)."""
+        """RLlib's checks, then every field's, then that a cost limit is set (the task's or cost_limit),
+        or the constraints' limits (names the task declares; several only where the algorithm trains
+        on several)."""
         super().validate()
         for name, value in self.params().items():
             self.FIELDS.check(name, value)
+        if self.constraints is not None and self.cost_limit is not None:
+            raise ValueError(f"cost_limit={self.cost_limit} and constraints={self.constraints} together; accepted: "
+                             "one of them (cost_limit: one limit on the summed cost; constraints: a limit each)")
+        several = self.constraint_set
+        if several is not None and len(several) > 1 and not self.SEVERAL_CONSTRAINTS:
+            raise ValueError(f"constraints {', '.join(several.names)}: {self.ALGO} trains on one constraint only "
+                             "so far; accepted: one constraint (cost_limit, or constraints with one limit), or an "
+                             "algorithm that trains on several (docs/constraints.md)")
         self.effective_cost_limit  # raises if neither cost_limit nor a task sets b
 
     def params(self) -> dict[str, Any]:
@@ -266,8 +285,34 @@ class SafeTaskConfig:
         return self._task_spec if self.task_id else None
 
     @property
+    def constraint_set(self) -> ConstraintSet | None:
+        """The run's constraints and limits (``constraints``, in the task's order); None: one
+        constraint on the summed cost ``info["cost"]``, at ``effective_cost_limit``. A name the task
+        does not declare, or a bad limit, is a ValueError naming it and the accepted ones."""
+        if self.constraints is None:
+            return None
+        spec = self.task_spec
+        if spec is None:
+            raise ValueError("constraints set and no task is set: call .task(id) first")
+        return select(spec.constraints, self.constraints, task_id=spec.id)
+
+    def constraints_data(self) -> dict | None:
+        """:attr:`constraint_set` as plain data (a connector's constructor argument), or None."""
+        several = self.constraint_set
+        return None if several is None else several.as_data()
+
+    @property
+    def num_constraints(self) -> int:
+        """K: the constraints a run holds under their limits apart (1 on the summed cost)."""
+        return 1 if self.constraints is None else len(self.constraint_set)
+
+    @property
     def effective_cost_limit(self) -> float:
-        """b: ``cost_limit`` if set, else the task's limit."""
+        """b: ``cost_limit`` if set, else the one constraint's limit (``constraints`` with one), else
+        the task's limit. With several constraints, their sum (the limit their summed cost would
+        have; each constraint is held under its own: ``constraint_set``)."""
+        if self.constraints is not None:
+            return float(sum(self.constraint_set.limits))
         if self.cost_limit is not None:
             return float(self.cost_limit)
         if self.task_spec is None:

@@ -35,6 +35,7 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.cup.config import PROJECTION_EPOCHS, PROJECTION_KL, PROJECTION_LOSS
 from lac_rllib.algorithms.cup.row_index import ROW_INDEX, AddRowIndex
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
+from lac_rllib.constrained.lagrange import nu_weighted
 from lac_rllib.constrained.minibatch_loop import TS_MINIBATCHES
 from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 from lac_rllib.families.on_policy.learner import POLICY, gaussian_logp
@@ -117,7 +118,11 @@ class CUPTorchLearner(PPOLagTorchLearner):
         ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])  # against the behaviour policy [O logp]
         kl = kl_to_reference(dist_cls, logits, reference.index_select(0, batch[ROW_INDEX]))  # KL(π_θ ‖ π_stage1)
         coef = (1.0 - config.gamma * config.lambda_) / (1.0 - config.gamma)  # [O: gamma, lam]
-        loss = (module.nu.detach() * coef * ratio * batch[COST_ADVANTAGES] + kl)[rows].mean()
+        nu = module.nu.detach()
+        if nu.dim() == 0:
+            loss = (nu * coef * ratio * batch[COST_ADVANTAGES] + kl)[rows].mean()
+        else:  # K constraints: Σ_k ν_k·A^C_k in place of ν·A^C
+            loss = (coef * ratio * nu_weighted(nu, batch[COST_ADVANTAGES]) + kl)[rows].mean()
         if self.reports_minibatch:
             self.metrics.log_value((module_id, PROJECTION_LOSS), loss.detach(), window=1)
         return loss

@@ -27,6 +27,7 @@ from ray.rllib.evaluation.postprocessing import Postprocessing
 
 from lac_rllib.algorithms.focops.config import TRUST_REGION_FRACTION
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
+from lac_rllib.constrained.lagrange import nu_total, nu_weighted
 from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
 from lac_rllib.families.on_policy.projection import kl_to_reference, within
 
@@ -36,10 +37,11 @@ class FOCOPSTorchLearner(PPOLagTorchLearner):
     MINIBATCH_COLUMNS = (*PPOLagTorchLearner.MINIBATCH_COLUMNS, Columns.ACTION_DIST_INPUTS)
 
     def policy_advantages(self, config, module, batch) -> torch.Tensor:
-        """A = (A^R − ν·A^C)/(1 + ν) [O], or A^R − ν·A^C with ``nu_divides_advantage=False`` [F]."""
+        """A = (A^R − ν·A^C)/(1 + ν) [O], or A^R − ν·A^C with ``nu_divides_advantage=False`` [F]; with
+        K constraints Σ_k ν_k·A^C_k and 1 + Σ_k ν_k."""
         nu = module.nu.detach()
-        advantages = batch[Postprocessing.ADVANTAGES] - nu * batch[COST_ADVANTAGES]
-        return advantages / (1.0 + nu) if config.nu_divides_advantage else advantages
+        advantages = batch[Postprocessing.ADVANTAGES] - nu_weighted(nu, batch[COST_ADVANTAGES])
+        return advantages / (1.0 + nu_total(nu)) if config.nu_divides_advantage else advantages
 
     def policy_loss(self, module_id, config, module, batch, logits, logp, advantages, masked_mean):
         """Eq. (11) per row (the module docstring), or OmniSafe's broadcast of it

@@ -27,10 +27,15 @@ class LAC(OffPolicySafeAlgorithm):
         cfg = self.config
         returns, costs = self.sample_into_replay(random_actions=self.iteration < cfg.random_iterations)
         n_rows = self.replay_buffer.get_num_timesteps()
+        # Ĵ_C of eq. (14): the mean cost of the episodes completed in this batch [C]; with K
+        # constraints the K means, one per multiplier.
+        if cfg.num_constraints > 1:
+            j_c = np.mean(self.constraint_costs, axis=0).tolist() if self.constraint_costs else None
+        else:
+            j_c = float(np.mean(costs)) if costs else None
         self.update_from_replay(
             minibatch_size=cfg.lac_minibatch_size,
             num_total_minibatches=max(1, int(cfg.gradient_passes * n_rows / cfg.lac_minibatch_size)),
-            # eq. (14) uses only episodes that completed in this batch [C].
-            timesteps={TS_MEAN_EPISODE_COST: float(np.mean(costs)) if costs else None, TS_ITERATION: self.iteration},
+            timesteps={TS_MEAN_EPISODE_COST: j_c, TS_ITERATION: self.iteration},
         )
-        self.log_top_level(returns, costs)
+        self.log_top_level(returns, costs, self.constraint_costs)

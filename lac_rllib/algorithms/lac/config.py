@@ -241,6 +241,9 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
 
     ALGO = "lac"
     PARAMS, FIELDS, PRESETS = LACParams, FIELDS, PRESETS
+    #: K constraints: twin cost critics and a ν_k (eq. 14, its own adaptive bound) each; the chain's
+    #: energy weighs Σ_k ν_k·max_j Q_Ckj (lac_rllib/algorithms/lac/energy.py).
+    SEVERAL_CONSTRAINTS = True
     #: LAC's four: the chain's length T, step size η, temperature λ, KL weight β. The paper's Table 3
     #: varies T and β only; η and λ are fixed by its Tables 4-5, so they are searched a decade either
     #: side of the task's default on a log scale (its default at the centre: this project's

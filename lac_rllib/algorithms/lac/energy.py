@@ -4,7 +4,9 @@
     ∇_a E   = Σ_e coef_e·∇_a Q_e(s, a) + w·(a − μ)/σ²,
 
 where coef is −1/λ on the argmin reward critic and +ν/λ on the argmax cost critic of each sample
-(min and max are piecewise: the subgradient flows through the selected member only).
+(min and max are piecewise: the subgradient flows through the selected member only). With K
+constraints ν is (K,) and the cost term Σ_k ν_k·max_j Q_Ckj, each constraint's twin cost critics
+their own group of rows (+ν_k/λ on each group's argmax).
 
 One formula, two ways to run the critics' backward pass, chosen by ``langevin_fused``:
 - :func:`eager_grad_fn`: ``CriticEnsemble.q_and_action_grad``, a hand-written backward with
@@ -33,7 +35,7 @@ import math
 import torch
 
 from lac_rllib.constrained import networks
-from lac_rllib.constrained.networks import CriticEnsemble, cost_rows, reward_rows
+from lac_rllib.constrained.networks import CriticEnsemble, cost_rows, max_per_constraint, reward_rows
 from lac_rllib.constrained.precision import DTYPES, TORCH_DTYPES
 
 logger = logging.getLogger(__name__)
@@ -50,11 +52,18 @@ def gaussian_terms(mean: torch.Tensor, log_std: torch.Tensor, logp_weight: float
 
 
 def selection(q: torch.Tensor, n_reward: int, inv_lam: float, nu, cols: torch.Tensor) -> torch.Tensor:
-    """coef (E, B): −1/λ on each sample's argmin reward critic, +ν/λ on its argmax cost critic."""
+    """coef (E, B): −1/λ on each sample's argmin reward critic, +ν/λ on its argmax cost critic (with
+    K constraints, ν (K,): +ν_k/λ on the argmax of each constraint's group of cost critics)."""
     coef = torch.zeros_like(q)
     coef[reward_rows(q, n_reward).argmin(0), cols] = -inv_lam
-    if q.shape[0] > n_reward:
+    if q.shape[0] > n_reward and nu.dim() == 0:
         coef[n_reward + cost_rows(q, n_reward).argmax(0), cols] = nu * inv_lam
+    elif q.shape[0] > n_reward:
+        k = nu.shape[0]
+        group = (q.shape[0] - n_reward) // k
+        first = n_reward + group * torch.arange(k, device=q.device)[:, None]
+        rows = first + cost_rows(q, n_reward).reshape(k, group, -1).argmax(1)  # (K, B)
+        coef[rows, cols.expand(k, -1)] = (nu * inv_lam).to(q.dtype)[:, None].expand(k, q.shape[1])
     return coef
 
 
@@ -62,8 +71,10 @@ def energy_of(q: torch.Tensor, diff: torch.Tensor, inv_var, logp_const, nu, *, i
               logp_weight: float, n_reward: int) -> torch.Tensor:
     """E(s, a) (B,) from the critics' Q (E, B) and a − μ (B, A)."""
     energy = -inv_lam * reward_rows(q, n_reward).min(0).values
-    if q.shape[0] > n_reward:
+    if q.shape[0] > n_reward and nu.dim() == 0:
         energy = energy + nu * inv_lam * cost_rows(q, n_reward).max(0).values
+    elif q.shape[0] > n_reward:  # K constraints: Σ_k ν_k·max_j Q_Ckj
+        energy = energy + inv_lam * (nu[:, None] * max_per_constraint(cost_rows(q, n_reward), nu.shape[0])).sum(0)
     return energy + logp_weight * 0.5 * (diff * diff * inv_var).sum(-1) + logp_const
 
 

@@ -169,8 +169,8 @@ def langevin_chain(critics: CriticEnsemble, obs: torch.Tensor, mean: torch.Tenso
     start, ``noise[1:]`` the step noise; otherwise all noise is drawn from ``generator``.
     """
     s = settings
-    if float(nu) < 0:
-        raise ValueError(f"nu={float(nu)!r}; must be ≥ 0")
+    if bool((torch.as_tensor(nu) < 0).any()):
+        raise ValueError(f"nu={torch.as_tensor(nu).tolist()!r}; must be ≥ 0")
     shape = mean.shape
     if noise is not None and noise.shape != (s.steps + 1, *shape):
         raise ValueError(f"noise.shape={tuple(noise.shape)}; expected {(s.steps + 1, *shape)}")

@@ -26,7 +26,15 @@ from lac_rllib.algorithms.lac import module as M
 from lac_rllib.constrained.costs import COSTS
 from lac_rllib.constrained.cpus import learner_torch
 from lac_rllib.constrained.gradients import clip_global_norm_, polyak_, zero_non_finite_
-from lac_rllib.constrained.lagrange import GradientStep, LagrangeMultiplier, fixed_multiplier, restore_multipliers
+from lac_rllib.constrained.lagrange import (
+    GradientStep,
+    LagrangeMultiplier,
+    Multipliers,
+    each_multiplier,
+    fixed_multiplier,
+    multipliers_for,
+    restore_multipliers,
+)
 from lac_rllib.constrained.metrics import (
     ACTOR_KL,
     ACTOR_LOSS,
@@ -46,8 +54,9 @@ from lac_rllib.constrained.metrics import (
     TARGET_REWARD_MEAN,
     TS_ITERATION,
     TS_MEAN_EPISODE_COST,
+    per_constraint,
 )
-from lac_rllib.constrained.networks import cost_rows, gaussian_kl, gaussian_log_prob, reward_rows
+from lac_rllib.constrained.networks import cost_rows, gaussian_kl, gaussian_log_prob, max_per_constraint, reward_rows
 
 CRITIC, ACTOR = "critic", "actor"  # optimizer names, one per loss
 # Chain health is averaged over the last HEALTH_WINDOW minibatches, about one iteration (one pass
@@ -66,17 +75,22 @@ def critic_targets(batch, q_next: torch.Tensor, n_reward: int, config) -> tuple[
 
     ``q_next`` is the target ensemble Q' at (s', ã') (E, B); k_r = ``reward_scale``, γ_C =
     ``cost_gamma``. d = terminated: time-limit truncation bootstraps [D] unless
-    ``bootstrap_on_truncation`` is off, d = terminated ∨ truncated, which reproduces [C]."""
+    ``bootstrap_on_truncation`` is off, d = terminated ∨ truncated, which reproduces [C]. With K
+    constraints (costs (B, K)) y_C is (B, K), each from its own twin cost critics."""
     # d in the critics' dtype: float32 as before in training; in a float64 step (the golden test)
     # a float32 d would round γ·(1 − d) to float32.
     done = batch[Columns.TERMINATEDS].to(q_next.dtype)
     if not config.bootstrap_on_truncation:
         done = torch.maximum(done, batch[Columns.TRUNCATEDS].to(q_next.dtype))
     min_q_r = reward_rows(q_next, n_reward).min(0).values
-    max_q_c = cost_rows(q_next, n_reward).max(0).values
     y_r = config.reward_scale * batch[Columns.REWARDS] + config.gamma * (1 - done) * min_q_r
-    y_c = batch[COSTS] + config.cost_gamma * (1 - done) * max_q_c
-    return y_r, y_c
+    costs = batch[COSTS]
+    if costs.dim() == 1:
+        max_q_c = cost_rows(q_next, n_reward).max(0).values
+        return y_r, costs + config.cost_gamma * (1 - done) * max_q_c
+    # K constraints: y_Ck = c_k + γ_C·(1 − d)·max_j Q'_Ckj, (B, K)
+    max_q_c = max_per_constraint(cost_rows(q_next, n_reward), costs.shape[1]).T
+    return y_r, costs + config.cost_gamma * (1 - done)[:, None] * max_q_c
 
 
 class LACTorchLearner(TorchLearner):
@@ -90,14 +104,15 @@ class LACTorchLearner(TorchLearner):
         self._iteration = 0
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
 
-    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier | Multipliers:
         """ν of ``module``: eq. (14)'s gradient step, under [C]'s bound when ``nu_max_adaptive``; or
-        held at ``nu_fixed`` for the whole run."""
+        held at ``nu_fixed`` for the whole run. With K constraints a ν_k each, each bound from ȳ_R
+        and its own ȳ_Ck."""
         config = self.config.get_config_for_module(module_id)
         if held := fixed_multiplier(module.unwrapped().nu, config):
             return held
-        return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit,
-                                  rule=GradientStep(config.nu_lr), bounded=config.nu_max_adaptive)
+        return multipliers_for(module.unwrapped().nu, config, lambda value, b: LagrangeMultiplier(
+            value, cost_limit=b, rule=GradientStep(config.nu_lr), bounded=config.nu_max_adaptive))
 
     @override(TorchLearner)
     def configure_optimizers_for_module(self, module_id, config=None) -> None:
@@ -119,8 +134,9 @@ class LACTorchLearner(TorchLearner):
         super().before_gradient_based_update(timesteps=timesteps)
         self._iteration = int(timesteps.get(TS_ITERATION, self._iteration))
         for multiplier in self.multipliers.values():
-            multiplier.step(timesteps.get(TS_MEAN_EPISODE_COST))
-            multiplier.bound.start_iteration()
+            multiplier.step(timesteps.get(TS_MEAN_EPISODE_COST))  # K values with K constraints
+            for part in each_multiplier(multiplier):
+                part.bound.start_iteration()
 
     @override(TorchLearner)
     def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
@@ -128,9 +144,21 @@ class LACTorchLearner(TorchLearner):
         iteration's mean targets ȳ_R, ȳ_C (logged)."""
         super().after_gradient_based_update(timesteps=timesteps)  # steps the lr schedules
         for mid, multiplier in self.multipliers.items():
-            means = multiplier.bound.end_iteration()
-            if means is not None:
-                self.metrics.log_dict({TARGET_REWARD_MEAN: means[0], TARGET_COST_MEAN: means[1]}, key=mid, window=1)
+            names = self.constraint_names(mid)
+            for k, part in enumerate(each_multiplier(multiplier)):
+                means = part.bound.end_iteration()
+                if means is not None:
+                    self.metrics.log_dict({TARGET_REWARD_MEAN: means[0],
+                                           self.key(TARGET_COST_MEAN, names, k): means[1]}, key=mid, window=1)
+
+    def constraint_names(self, module_id) -> tuple[str, ...] | None:
+        """The names of a module's K constraints, None with one (its metrics keep their plain keys)."""
+        several = self.config.get_config_for_module(module_id).constraint_set
+        return several.names if several is not None and len(several) > 1 else None
+
+    @staticmethod
+    def key(key: str, names, k: int) -> str:
+        return key if names is None else per_constraint(key, names[k])
 
     # ----- losses -----
     @override(TorchLearner)
@@ -149,6 +177,8 @@ class LACTorchLearner(TorchLearner):
         n_r = module.critics.n_reward
         q_r, q_c = reward_rows(fwd_out[M.Q_PRED], n_r), cost_rows(fwd_out[M.Q_PRED], n_r)
         y_r, y_c = critic_targets(batch, fwd_out[M.Q_TARGET_NEXT], n_r, config)
+        if y_c.dim() == 2:  # K constraints: each twin pair regresses on its own y_Ck
+            y_c = y_c.T.repeat_interleave(q_c.shape[0] // y_c.shape[1], dim=0)
         critic_loss = ((q_r - y_r) ** 2).mean(-1).sum() + ((q_c - y_c) ** 2).mean(-1).sum()
 
         mean, log_std = fwd_out[M.ACTOR_MEAN], fwd_out[M.ACTOR_LOG_STD]
@@ -157,15 +187,20 @@ class LACTorchLearner(TorchLearner):
         actor_loss = nll + config.beta * kl
 
         with torch.no_grad():
-            multiplier = self.multipliers[module_id]
-            multiplier.bound.observe(y_r, y_c)
+            multiplier, names = self.multipliers[module_id], self.constraint_names(module_id)
+            parts = each_multiplier(multiplier)
+            for k, part in enumerate(parts):  # y_C (B,), or its rows of constraint k's twin critics
+                part.bound.observe(y_r, y_c if names is None else y_c[k * (len(y_c) // len(parts))])
             chain = fwd_out[M.CHAIN]
             self.metrics.log_dict({
                 CRITIC_LOSS: critic_loss, ACTOR_LOSS: actor_loss, ACTOR_NLL: nll, ACTOR_KL: kl,
-                Q_REWARD_MEAN: q_r.mean(), Q_COST_MEAN: q_c.mean(), NU: module.nu.clone(),
+                Q_REWARD_MEAN: q_r.mean(), Q_COST_MEAN: q_c.mean(),
+                NU: module.nu.clone() if names is None else module.nu.max(),
+                **({} if names is None else {per_constraint(NU, n): module.nu[k].clone() for k, n in enumerate(names)}),
             }, key=module_id, window=1)
-            if multiplier.upper is not None:
-                self.metrics.log_value((module_id, NU_MAX), multiplier.upper, window=1)
+            for k, part in enumerate(parts):
+                if part.upper is not None:
+                    self.metrics.log_value((module_id, self.key(NU_MAX, names, k)), part.upper, window=1)
             # Chain health over the last HEALTH_WINDOW minibatches (≈ this iteration's).
             self.metrics.log_dict({
                 LANGEVIN_ENERGY_DROP: (chain.energy_start - chain.energy_end).mean(),

@@ -2,7 +2,8 @@
 
 - ``actor``: the Gaussian generator π_φ (docs/spec.md §3). Inference acts with its mean, exploration
   samples it (RLlib's TorchDiagGaussian over [mean, log_std]).
-- ``critics``: 2 reward + 2 cost critics as one batched ensemble (docs/spec.md §2).
+- ``critics``: 2 reward + 2 cost critics as one batched ensemble (docs/spec.md §2); with K
+  constraints (``num_constraints``) 2 cost critics each, ν then (K,).
 - ``target_actor`` / ``target_critics``: Polyak copies π_φ', Q' (Algorithm 2, lines 11-13).
 - ``nu``: the Lagrange multiplier ν (eq. 14). It is a buffer of the module, so it travels with
   the weights (the Learner's state, checkpoints) and a restored module can run the chain at
@@ -50,9 +51,11 @@ class LACTorchRLModule(ActorCriticRLModule):
             activation=cfg["actor_activation"], log_std_init=cfg["log_std_init"],
             mean_init_scale=cfg["actor_mean_init_scale"],
         )
-        self.register_buffer("nu", torch.tensor(initial_nu(cfg)))
+        k = int(cfg.get("num_constraints", 1))  # K constraints: ν (K,) and twin cost critics each
+        self.register_buffer("nu", torch.tensor(initial_nu(cfg)) if k == 1 else torch.full((k,), initial_nu(cfg)))
         if not self.inference_only:
-            self.critics = CriticEnsemble(obs_dim, act_dim, hidden=tuple(cfg["critic_hidden"]))
+            self.critics = CriticEnsemble(obs_dim, act_dim, hidden=tuple(cfg["critic_hidden"]),
+                                          **({"n_cost": 2 * k} if k > 1 else {}))
         self.chain_settings = chain_settings(cfg, self.action_space)
 
     # ----- acting (env runners) -----
@@ -81,7 +84,7 @@ class LACTorchRLModule(ActorCriticRLModule):
         if mode == "generator":
             return {}
         return {"langevin_steps": steps or self.chain_settings.steps,
-                "langevin_step_size": step_size or self.chain_settings.step_size, "nu": float(self.nu)}
+                "langevin_step_size": step_size or self.chain_settings.step_size, "nu": self.nu.tolist()}
 
     # ----- training (learner) -----
     @override(TorchRLModule)

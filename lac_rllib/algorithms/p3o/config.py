@@ -56,6 +56,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 class P3OConfig(OnPolicyConfig):
     """Config for :class:`lac_rllib.algorithms.p3o.algorithm.P3O`; fields: :class:`P3OParams`."""
 
+    SEVERAL_CONSTRAINTS = True  # a penalty per constraint, each on its own cost advantage and limit
+
     ALGO = "p3o"
     OMNISAFE_NAME = "P3O"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = P3OParams, fields.FieldSet(P3OParams, "P3O"), PRESETS

@@ -59,6 +59,10 @@ class PPOLagConfig(OnPolicyConfig):
     win) the paper's PPO-L. Explicit ``training(...)`` values win over presets.
     """
 
+    # A cost critic, cost advantage and multiplier per constraint (families/on_policy/lagrangian.py);
+    # FOCOPS and CUP inherit it.
+    SEVERAL_CONSTRAINTS = True
+
     ALGO = "ppo_lag"
     OMNISAFE_NAME = "PPOLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = PPOLagParams, fields.FieldSet(PPOLagParams, "PPO-Lag"), PRESETS

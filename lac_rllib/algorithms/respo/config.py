@@ -142,6 +142,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 class RESPOConfig(PPOLagConfig):
     """Config for :class:`lac_rllib.algorithms.respo.algorithm.RESPO`; fields: :class:`RESPOParams`."""
 
+    SEVERAL_CONSTRAINTS = True  # a reach critic, ψ_k and reach-weighted ν_k per constraint (learner.py)
+
     ALGO = "respo"
     PARAMS, FIELDS, PRESETS = RESPOParams, fields.FieldSet(RESPOParams, "RESPO"), PRESETS
     SEARCH_SPACE = {

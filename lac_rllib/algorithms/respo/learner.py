@@ -21,6 +21,14 @@ One iteration (one ``learner_group.update``), with ψ(s) = 1 − V_p(s) from V_p
 
 Every lr, ν's included, decays linearly to 0 with the policy's (``decay_every_lr`` [G LinearLR on
 all five optimizers]): ν's is lagrangian_lr times the policy's current lr over its initial one.
+
+With K constraints: a reach critic V_pk, ψ_k = 1 − V_pk and a ν_k per constraint, each ν_k stepping
+on (J_Ck − b_k)·mean(ψ_k); the loss
+
+    L_π = −[ min(r·A^R·ψ, clip(r, 1 ± ε)·A^R·ψ) − Σ_k r·A^C_k·(ν_k·ψ_k + (1 − ψ_k)) ] / (1 + Σ_k ν_k),
+
+ψ = Π_k ψ_k: the reward is pursued where no constraint's violation is reachable (the K
+reachabilities taken as independent; [G] states one constraint).
 """
 
 from __future__ import annotations
@@ -33,10 +41,10 @@ from ray.rllib.utils.annotations import override
 from lac_rllib.algorithms.ppo_lag.learner import PPOLagTorchLearner
 from lac_rllib.algorithms.respo.config import REACH_PROB_MEAN, REACH_VF_LOSS
 from lac_rllib.algorithms.respo.reachability import REACH_PROBS, REACH_TARGETS, ReachTargets
-from lac_rllib.constrained.lagrange import LagrangeMultiplier
-from lac_rllib.constrained.metrics import NU
+from lac_rllib.constrained.lagrange import LagrangeMultiplier, Multipliers, each_multiplier, nu_total
+from lac_rllib.constrained.metrics import NU, per_constraint
 from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES
-from lac_rllib.families.on_policy.learner import COST_CRITIC, CRITIC, POLICY
+from lac_rllib.families.on_policy.learner import COST_CRITIC, CRITIC, POLICY, cost_critic_loss
 
 REACH_CRITIC = "reach_critic"  # the 4th optimizer's name
 
@@ -84,11 +92,22 @@ class RESPOTorchLearner(PPOLagTorchLearner):
         return [*super().learner_pieces(), ("append", self.reachability)]
 
     @override(PPOLagTorchLearner)
-    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
-        """PPO-Lag's rule and bound (softplus-Adam by default [G]), on the weighted error and b."""
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier | Multipliers:
+        """PPO-Lag's rule and bound (softplus-Adam by default [G]), on the weighted error and b (with
+        K constraints each ν_k on its own, b_k its limit unless ``multiplier_cost_limit`` is set)."""
         base, config = super().make_multiplier(module_id, module), self.config.get_config_for_module(module_id)
-        return ReachWeightedMultiplier(module.unwrapped().nu, cost_limit=config.multiplier_limit, rule=base.rule,
-                                       bound=base.bound, bounded=base.bounded)
+
+        def weighted(part: LagrangeMultiplier, value, limit: float) -> ReachWeightedMultiplier:
+            return ReachWeightedMultiplier(value, cost_limit=limit, rule=part.rule, bound=part.bound,
+                                           bounded=part.bounded)
+
+        if not isinstance(base, Multipliers):
+            return weighted(base, module.unwrapped().nu, config.multiplier_limit)
+        fixed = config.multiplier_cost_limit
+        limits = [fixed if fixed is not None else b for b in config.constraint_set.limits]
+        base.parts = [weighted(part, module.unwrapped().nu[k], limit)
+                      for k, (part, limit) in enumerate(zip(base.parts, limits))]
+        return base
 
     @override(PPOLagTorchLearner)
     def optimizer_groups(self, module, config) -> dict:
@@ -119,10 +138,20 @@ class RESPOTorchLearner(PPOLagTorchLearner):
         decay = 1.0
         if config.decay_every_lr and config.policy_lr_schedule == "linear":
             decay = self._get_optimizer_lr(self.get_optimizer(module_id, POLICY)) / config.lr
-        set_rule_lr(multiplier.rule, config.lagrangian_lr * decay)
         safe = self.reachability.safe_fraction[module_id]
-        multiplier.step_weighted(safe)
-        self.metrics.log_dict({NU: multiplier.value, REACH_PROB_MEAN: 1.0 - safe}, key=module_id, window=1)
+        if not isinstance(multiplier, Multipliers):
+            set_rule_lr(multiplier.rule, config.lagrangian_lr * decay)
+            multiplier.step_weighted(safe)
+            self.metrics.log_dict({NU: multiplier.value, REACH_PROB_MEAN: 1.0 - safe}, key=module_id, window=1)
+            return
+        names = config.constraint_set.names
+        for part, safe_k in zip(each_multiplier(multiplier), safe, strict=True):  # each ν_k on its own ψ̄_k
+            set_rule_lr(part.rule, config.lagrangian_lr * decay)
+            part.step_weighted(safe_k)
+        self.metrics.log_dict({NU: max(multiplier.value), REACH_PROB_MEAN: 1.0 - min(safe),
+                               **{per_constraint(NU, n): v for n, v in zip(names, multiplier.value)},
+                               **{per_constraint(REACH_PROB_MEAN, n): 1.0 - f for n, f in zip(names, safe)}},
+                              key=module_id, window=1)
 
     # ----- losses -----
     @override(PPOLagTorchLearner)
@@ -137,6 +166,12 @@ class RESPOTorchLearner(PPOLagTorchLearner):
         psi = 1.0 - batch[REACH_PROBS] if config.reach_weighted else 1.0  # ψ = 1 − V_p(s), at collection
         ratio = torch.exp(logp - batch[Columns.ACTION_LOGP])
         clipped = torch.clamp(ratio, 1 - config.clip_param, 1 + config.clip_param)
+        if nu.dim() == 1:  # K constraints (the module docstring): ψ_k per constraint, their product for A^R
+            psi_k = psi if torch.is_tensor(psi) else torch.ones_like(nu)
+            psi = psi_k.prod(-1) if torch.is_tensor(psi) else 1.0
+            reward = torch.min(ratio * advantages * psi, clipped * advantages * psi)
+            cost = (ratio[:, None] * batch[COST_ADVANTAGES] * (nu * psi_k + (1.0 - psi_k))).sum(-1)
+            return -(reward - cost) / (1.0 + nu_total(nu)), None
         reward = torch.min(ratio * advantages * psi, clipped * advantages * psi)  # [G loss_rpi]
         cost = ratio * batch[COST_ADVANTAGES] * (nu * psi + (1.0 - psi))  # [G loss_cpi], unclipped
         return -(reward - cost) / (1.0 + nu), None
@@ -146,7 +181,7 @@ class RESPOTorchLearner(PPOLagTorchLearner):
         """PPO-Lag's loss (the policy's above, V_R's and V_C's MSE) plus V_p's MSE [G compute_loss_v]."""
         loss = super().fused_loss(module_id, config, module, batch, fwd_out, advantages)
         mask = batch[Columns.LOSS_MASK]
-        reach_loss = ((module.compute_reach_probs(batch) - batch[REACH_TARGETS]) ** 2)[mask].mean()
+        reach_loss = cost_critic_loss(module.compute_reach_probs(batch), batch[REACH_TARGETS], mask)  # Σ_k with K
         if self.reports_minibatch:
             self.metrics.log_value((module_id, REACH_VF_LOSS), reach_loss.detach(), window=1)
         return loss + reach_loss

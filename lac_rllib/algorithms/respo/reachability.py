@@ -12,7 +12,8 @@ bootstrap there. [G] appends float(V_C(s_T) > 0) instead, which is 1 wherever th
 positive: every cut path's last states then look unsafe (docs/baselines.md, "RESPO on PPO-Lag's house").
 
 V_p(s) at collection, i.e. before this update changes it [G: ``pval`` in finish_path], rides in
-the batch: the loss weighs its surrogates by it, and ν's step by its mean (learner.py).
+the batch: the loss weighs its surrogates by it, and ν's step by its mean (learner.py). With K
+constraints each has its own V_pk and targets from its own cost column.
 """
 
 from __future__ import annotations
@@ -70,9 +71,14 @@ class ReachTargets(ConnectorV2):
                 probs_t = module.compute_reach_probs(columns)
             probs = convert_to_numpy(probs_t)
             mask = convert_to_numpy(columns[Columns.LOSS_MASK]).astype(bool)
-            targets = reach_targets(convert_to_numpy(columns[COSTS]), probs,
-                                    convert_to_numpy(columns[Columns.TERMINATEDS]), mask, gamma=self.gamma)
+            costs, terminateds = convert_to_numpy(columns[COSTS]), convert_to_numpy(columns[Columns.TERMINATEDS])
+            if probs.ndim == 1:
+                targets = reach_targets(costs, probs, terminateds, mask, gamma=self.gamma)
+                self.safe_fraction[module_id] = float(1.0 - probs[mask].mean())
+            else:  # K constraints: each column apart; a safe fraction each
+                targets = np.stack([reach_targets(costs[:, k], probs[:, k], terminateds, mask, gamma=self.gamma)
+                                    for k in range(probs.shape[1])], axis=-1)
+                self.safe_fraction[module_id] = (1.0 - probs[mask].mean(0)).tolist()
             columns[REACH_PROBS] = probs_t
             columns[REACH_TARGETS] = torch.from_numpy(targets).to(probs_t.device)
-            self.safe_fraction[module_id] = float(1.0 - probs[mask].mean())
         return batch

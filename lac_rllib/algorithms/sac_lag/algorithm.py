@@ -16,7 +16,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.sac_lag.config import SACLagConfig
-from lac_rllib.constrained.metrics import NU, TS_EPISODE_COSTS
+from lac_rllib.constrained.metrics import NU, TS_CONSTRAINT_COSTS, TS_EPISODE_COSTS
 from lac_rllib.constrained.minibatch_loop import update_kwargs
 from lac_rllib.families.off_policy.algorithm import OffPolicySafeAlgorithm
 
@@ -43,11 +43,13 @@ class SACLag(OffPolicySafeAlgorithm):
                 plan = {"num_total_minibatches": max(1, round(cfg.updates_per_env_step * new_steps)),
                         "num_epochs": 2, "shuffle": True}
             passes = update_kwargs(cfg.update_path, minibatch_size=cfg.batch_size, **plan)
-            passes["timesteps"] = {TS_EPISODE_COSTS: list(costs), **passes["timesteps"]}
+            passes["timesteps"] = {TS_EPISODE_COSTS: list(costs), **passes["timesteps"],
+                                   **({TS_CONSTRAINT_COSTS: self.constraint_costs} if self.constraint_costs else {})}
             self.update_from_replay(**passes)
-        self.log_top_level(returns, costs)
+        self.log_top_level(returns, costs, self.constraint_costs)
         if not updating:
             # No learner results yet, so log_top_level found no ν: report λ as the learner holds it
-            # (λ₀), so that every row has a finite ν.
-            results = self.learner_group.foreach_learner(lambda learner: float(learner.module[DEFAULT_MODULE_ID].nu))
+            # (λ₀), so that every row has a finite ν (the largest λ_k with K constraints).
+            results = self.learner_group.foreach_learner(
+                lambda learner: float(learner.module[DEFAULT_MODULE_ID].nu.max()))
             self.metrics.log_value(NU, next(iter(results)).get(), window=1)

@@ -194,6 +194,8 @@ class SACLagConfig(OffPolicyConfig, AlgorithmConfig):
     :class:`SACLagParams`'. ``SACLagConfig().task(id)`` sets the env, its cost convention and the
     task's preset; explicit ``training(...)`` values win over the preset."""
 
+    SEVERAL_CONSTRAINTS = True  # a cost critic and a λ each (OmniSafe's Adam step per constraint)
+
     ALGO = "sac_lag"
     OMNISAFE_NAME = "SACLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = SACLagParams, FIELDS, PRESETS

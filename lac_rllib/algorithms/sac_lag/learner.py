@@ -42,7 +42,11 @@ from lac_rllib.constrained.lagrange import (
     AdamStep,
     GradientStep,
     LagrangeMultiplier,
+    Multipliers,
     fixed_multiplier,
+    multipliers_for,
+    nu_total,
+    nu_weighted,
     restore_multipliers,
 )
 from lac_rllib.constrained.metrics import (
@@ -52,7 +56,9 @@ from lac_rllib.constrained.metrics import (
     NU,
     Q_COST_MEAN,
     Q_REWARD_MEAN,
+    TS_CONSTRAINT_COSTS,
     TS_EPISODE_COSTS,
+    per_constraint,
 )
 from lac_rllib.constrained.minibatch_loop import FusedMinibatchLoop
 
@@ -76,6 +82,8 @@ def critic_targets(batch: dict, fwd_out: dict, config) -> tuple[torch.Tensor, to
     not_done = 1.0 - batch[Columns.TERMINATEDS].to(fwd_out[M.Q_COST_NEXT].dtype)
     soft_next = fwd_out[M.Q_REWARD_NEXT].min(0).values - config.alpha * fwd_out[M.LOGP_NEXT]
     y_r = batch[Columns.REWARDS] + config.gamma * not_done * soft_next
+    if batch[COSTS].dim() == 2:  # K constraints: y_Ck from each constraint's cost critic, (B, K)
+        not_done = not_done[:, None]
     y_c = batch[COSTS] + config.cost_gamma * not_done * fwd_out[M.Q_COST_NEXT]
     return y_r, y_c
 
@@ -86,10 +94,12 @@ def actor_loss(actor_out: dict, nu: torch.Tensor, alpha: float) -> torch.Tensor:
         L_π = mean_B( α·log π(ã|s) − min_j Q_Rj(s, ã) + λ·Q_C(s, ã) ) / (1 + λ)
 
     λ is a constant here (the multiplier's value, no gradient), in the critics' dtype: OmniSafe adds
-    ``1 + λ.item()`` in Python floats, so in a float64 step 1 + λ is not rounded to float32."""
+    ``1 + λ.item()`` in Python floats, so in a float64 step 1 + λ is not rounded to float32. With K
+    constraints Σ_k λ_k·Q_Ck(s, ã) and 1 + Σ_k λ_k."""
     nu = nu.detach().to(actor_out[M.Q_COST_PI].dtype)
-    per_sample = alpha * actor_out[M.LOGP] - actor_out[M.Q_REWARD_PI].min(0).values + nu * actor_out[M.Q_COST_PI]
-    return per_sample.mean() / (1.0 + nu)
+    per_sample = (alpha * actor_out[M.LOGP] - actor_out[M.Q_REWARD_PI].min(0).values
+                  + nu_weighted(nu, actor_out[M.Q_COST_PI]))
+    return per_sample.mean() / (1.0 + nu_total(nu))
 
 
 class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
@@ -103,21 +113,23 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         self.module.foreach_module(
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None)
         self.updates = 0  # gradient steps so far: decides the policy-delay steps
-        self.cost_window: deque[float] = deque(maxlen=self.config.cost_window)
+        self.cost_window: deque = deque(maxlen=self.config.cost_window)  # K-lists with K constraints
+        several = self.config.constraint_set
+        #: The names of K > 1 constraints (None: one), whose costs the window holds per episode.
+        self.constraint_names = several.names if several is not None and len(several) > 1 else None
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
         self._cost_this_call: float | None = None  # Ĵ_C of the current update call; None: no λ step
         self._last: dict[str, dict[str, torch.Tensor]] = {}  # the last minibatch's metrics per module
         self._actor_obs: dict[str, torch.Tensor] = {}  # the minibatch's observations, for the actor's step
 
-    def make_multiplier(self, module_id, module) -> LagrangeMultiplier:
+    def make_multiplier(self, module_id, module) -> LagrangeMultiplier | Multipliers:
         """λ of ``module``: OmniSafe's Adam step on −λ·(Ĵ_C − b), then λ ≥ 0 (no upper bound [O]); or
-        held at ``nu_fixed`` for the whole run."""
+        held at ``nu_fixed`` for the whole run. With K constraints a λ_k each."""
         config = self.config.get_config_for_module(module_id)
         if held := fixed_multiplier(module.unwrapped().nu, config):
             return held
-        rule = LAGRANGE_RULES[config.lagrangian_rule](config.lagrangian_lr)
-        return LagrangeMultiplier(module.unwrapped().nu, cost_limit=config.effective_cost_limit, rule=rule,
-                                  bounded=False)
+        return multipliers_for(module.unwrapped().nu, config, lambda value, b: LagrangeMultiplier(
+            value, cost_limit=b, rule=LAGRANGE_RULES[config.lagrangian_rule](config.lagrangian_lr), bounded=False))
 
     @override(TorchLearner)
     def configure_optimizers_for_module(self, module_id, config=None) -> None:
@@ -137,15 +149,21 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         return (self.updates + 1) % self.config.policy_delay == 0
 
     @property
-    def episode_cost(self) -> float | None:
-        """Ĵ_C: the mean cost of the last ``cost_window`` completed episodes (None before the first)."""
-        return float(np.mean(self.cost_window)) if self.cost_window else None
+    def episode_cost(self) -> float | list[float] | None:
+        """Ĵ_C: the mean cost of the last ``cost_window`` completed episodes (None before the first);
+        K means with K constraints."""
+        if not self.cost_window:
+            return None
+        return np.mean(self.cost_window, axis=0).tolist() if self.constraint_names else float(np.mean(self.cost_window))
 
     # ----- around the gradient steps of one update call -----
     @override(TorchLearner)
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)
-        self.cost_window.extend(float(c) for c in timesteps.get(TS_EPISODE_COSTS, ()))
+        if self.constraint_names:
+            self.cost_window.extend(list(map(float, c)) for c in timesteps.get(TS_CONSTRAINT_COSTS, ()))
+        else:
+            self.cost_window.extend(float(c) for c in timesteps.get(TS_EPISODE_COSTS, ()))
         # OmniSafe: λ steps only after warmup_epochs; here after warmup_env_steps sampled.
         past_warmup = timesteps.get(NUM_ENV_STEPS_SAMPLED_LIFETIME, 0) > self.config.warmup_env_steps
         self._cost_this_call = self.episode_cost if past_warmup else None
@@ -155,10 +173,16 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         super().after_gradient_based_update(timesteps=timesteps)
         # Logged once per call (the last minibatch's values), not per minibatch: RLlib's logging
         # costs more than a tiny network's gradient step.
-        j_c = float("nan") if self._cost_this_call is None else self._cost_this_call
+        names, j_c = self.constraint_names, self._cost_this_call
         for mid, module in self.module.items():
-            self.metrics.log_dict({**self._last.get(mid, {}), NU: module.unwrapped().nu.clone(), COST_WINDOW_MEAN: j_c},
-                                  key=mid, window=1)
+            nu = module.unwrapped().nu
+            if names:  # each λ_k and Ĵ_Ck; ν itself reports the largest
+                own = {NU: nu.max(), **{per_constraint(NU, n): nu[k].clone() for k, n in enumerate(names)},
+                       **{per_constraint(COST_WINDOW_MEAN, n): float("nan") if j_c is None else j_c[k]
+                          for k, n in enumerate(names)}}
+            else:
+                own = {NU: nu.clone(), COST_WINDOW_MEAN: float("nan") if j_c is None else j_c}
+            self.metrics.log_dict({**self._last.get(mid, {}), **own}, key=mid, window=1)
 
     # ----- losses -----
     @override(TorchLearner)
@@ -169,7 +193,8 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         y_r, y_c = critic_targets(batch, fwd_out, config)
         q_r, q_c = fwd_out[M.Q_REWARD], fwd_out[M.Q_COST]
         reward_loss = ((q_r - y_r) ** 2).mean(-1).sum()  # mse(Q_R1, y_R) + mse(Q_R2, y_R)
-        cost_loss = ((q_c - y_c) ** 2).mean()
+        # K constraints: each cost critic's MSE, summed
+        cost_loss = ((q_c - y_c) ** 2).mean() if q_c.dim() == 1 else ((q_c - y_c) ** 2).mean(0).sum()
         self._last[module_id] = {**self._last.get(module_id, {}),
                                  CRITIC_LOSS: reward_loss.detach() + cost_loss.detach(),
                                  Q_REWARD_MEAN: q_r.detach().mean(), Q_COST_MEAN: q_c.detach().mean()}
@@ -225,7 +250,7 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
     def get_state(self, *args, **kwargs):
         state = super().get_state(*args, **kwargs)
         state[STATE_SAC_LAG] = {
-            "updates": self.updates, "cost_window": list(self.cost_window),
+            "updates": self.updates, "cost_window": list(self.cost_window),  # K-lists with K constraints
             "lagrange": {mid: m.get_state() for mid, m in self.multipliers.items()},
         }
         return state
@@ -238,5 +263,6 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
         if own is not None:
             self.updates = int(own["updates"])
             self.cost_window.clear()
-            self.cost_window.extend(float(c) for c in own["cost_window"])
+            self.cost_window.extend(list(map(float, c)) if self.constraint_names else float(c)
+                                    for c in own["cost_window"])
 

@@ -33,7 +33,7 @@ from lac_rllib.families.off_policy.module import ActorCriticRLModule
 
 # Keys of the forward outputs, declared once.
 Q_REWARD = "q_reward"  # (2, B) Q_R1, Q_R2 at (s, a)
-Q_COST = "q_cost"  # (B,) Q_C at (s, a)
+Q_COST = "q_cost"  # (B,) Q_C at (s, a); each Q_C below is (B, K) with K constraints
 Q_REWARD_NEXT = "q_reward_next"  # (2, B) target Q'_R at (s', a'), a' ~ π(·|s')
 LOGP_NEXT = "logp_next"  # (B,) log π(a'|s')
 Q_COST_NEXT = "q_cost_next"  # (B,) target Q'_C at (s', squash(μ(s')))
@@ -52,7 +52,9 @@ class SACLagTorchRLModule(ActorCriticRLModule):
         self.actor = SquashedGaussianActor(obs_dim, act_dim, hidden=tuple(cfg["actor_hidden"]),
                                            activation=cfg["activation"], log_std_min=cfg["log_std_min"],
                                            log_std_max=cfg["log_std_max"])
-        self.register_buffer("nu", torch.tensor(initial_nu(cfg)))
+        # K constraints: λ (K,) and a cost critic each (one ensemble of K members).
+        self.num_constraints = k = int(cfg.get("num_constraints", 1))
+        self.register_buffer("nu", torch.tensor(initial_nu(cfg)) if k == 1 else torch.full((k,), initial_nu(cfg)))
         # The action bounds as buffers: they move with the module to its device, and a restored
         # module's state is complete (lac_rllib.evaluation checks every buffer is restored).
         self.register_buffer("action_low", torch.tensor(np.array(self.action_space.low), dtype=torch.float32))
@@ -65,9 +67,13 @@ class SACLagTorchRLModule(ActorCriticRLModule):
             self.reward_critics = CriticEnsemble(obs_dim, act_dim, hidden=hidden, n_reward=2, n_cost=0,
                                                  activation=activation, matmul_dtype=dtype)
             # CriticEnsemble counts its members as n_reward + n_cost; the split matters only to
-            # LAC's chain, so the cost critic is a one-member ensemble.
-            self.cost_critic = CriticEnsemble(obs_dim, act_dim, hidden=hidden, n_reward=1, n_cost=0,
+            # LAC's chain, so the cost critic is a one-member ensemble (K members with K constraints).
+            self.cost_critic = CriticEnsemble(obs_dim, act_dim, hidden=hidden, n_reward=k, n_cost=0,
                                               activation=activation, matmul_dtype=dtype)
+
+    def cost_values(self, q: torch.Tensor) -> torch.Tensor:
+        """Q_C from the cost ensemble's output (K, B): (B,) with one constraint, (B, K) with K."""
+        return q[0] if self.num_constraints == 1 else q.T
 
     # ----- acting (env runners) -----
     def deterministic_action(self, obs: torch.Tensor) -> torch.Tensor:
@@ -104,10 +110,10 @@ class SACLagTorchRLModule(ActorCriticRLModule):
             q_reward_next = self.target_reward_critics(next_obs, next_action)
             # The cost target's next action is deterministic: squash(μ(s')) [O, ddpg.py].
             next_det = squash(next_mean, self.action_low, self.action_high)
-            q_cost_next = self.target_cost_critic(next_obs, next_det)[0]
+            q_cost_next = self.cost_values(self.target_cost_critic(next_obs, next_det))
         return {
             Q_REWARD: self.reward_critics(obs, action),
-            Q_COST: self.cost_critic(obs, action)[0],
+            Q_COST: self.cost_values(self.cost_critic(obs, action)),
             Q_REWARD_NEXT: q_reward_next,
             LOGP_NEXT: logp_next,
             Q_COST_NEXT: q_cost_next,
@@ -124,14 +130,15 @@ class SACLagTorchRLModule(ActorCriticRLModule):
             return {
                 LOGP: logp,
                 Q_REWARD_PI: self.reward_critics(obs, action),
-                Q_COST_PI: self.cost_critic(obs, action)[0],
+                Q_COST_PI: self.cost_values(self.cost_critic(obs, action)),
             }
 
     # ----- RLlib APIs -----
     @override(TargetNetworkAPI)
     def forward_target(self, batch: dict[str, Any]) -> dict[str, Any]:
         obs, action = batch[Columns.OBS], batch[Columns.ACTIONS]
-        return {Q_REWARD: self.target_reward_critics(obs, action), Q_COST: self.target_cost_critic(obs, action)[0]}
+        return {Q_REWARD: self.target_reward_critics(obs, action),
+                Q_COST: self.cost_values(self.target_cost_critic(obs, action))}
 
 
 @contextlib.contextmanager

@@ -46,6 +46,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 class TRPOLagConfig(TrustRegionConfig):
     """Config for :class:`lac_rllib.algorithms.trpo_lag.algorithm.TRPOLag`; fields: :class:`TRPOLagParams`."""
 
+    SEVERAL_CONSTRAINTS = True  # the same multipliers and advantage (families/on_policy/lagrangian.py)
+
     ALGO = "trpo_lag"
     OMNISAFE_NAME = "TRPOLag"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = TRPOLagParams, fields.FieldSet(TRPOLagParams, "TRPO-Lag"), PRESETS

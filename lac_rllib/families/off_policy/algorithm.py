@@ -18,7 +18,7 @@ from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, LEARNER_RESULTS, NUM_ENV
 from ray.rllib.utils.replay_buffers.episode_replay_buffer import EpisodeReplayBuffer
 
 from lac_rllib.constrained.algorithm import SafeAlgorithm
-from lac_rllib.constrained.costs import completed_episode_stats
+from lac_rllib.constrained.costs import completed_constraint_costs, completed_episode_stats
 
 #: Key of the replay buffer in the algorithm's checkpointed state (the name checkpoints carry since 0.1).
 REPLAY_BUFFER = "lac_replay_buffer"
@@ -50,7 +50,8 @@ class OffPolicySafeAlgorithm(SafeAlgorithm):
 
     def sample_into_replay(self, *, random_actions: bool) -> tuple[list[float], list[float]]:
         """Sample ``env_steps_per_iteration`` env steps into the buffer; the (returns, costs) of the
-        episodes that completed in them."""
+        episodes that completed in them (with several constraints, each one's K costs are kept in
+        ``constraint_costs``)."""
         cfg = self.config
         episodes, runner_results = synchronous_parallel_sample(
             worker_set=self.env_runner_group,
@@ -62,6 +63,8 @@ class OffPolicySafeAlgorithm(SafeAlgorithm):
         )
         self.metrics.aggregate(runner_results, key=ENV_RUNNER_RESULTS)
         returns, costs = completed_episode_stats(episodes)
+        #: With several constraints: each episode completed in the latest sample, its K costs.
+        self.constraint_costs = completed_constraint_costs(episodes)
         for episode in episodes:
             # The learners never read logp/dist inputs (off-policy, their own targets); and chunks
             # of random-action iterations have none, so a chunk from each side of the switch

@@ -52,6 +52,13 @@ class OffPolicyConfig(SafeTaskConfig):
         idx = max(worker_index - 1, 0)
         return max(1, base + (1 if idx * self.num_envs_per_env_runner < extra else 0))
 
+    @property
+    @override(AlgorithmConfig)
+    def _model_config_auto_includes(self) -> dict:
+        # Several constraints: the module builds a cost critic group and a ν per constraint.
+        k = self.num_constraints
+        return {**super()._model_config_auto_includes, **({"num_constraints": k} if k > 1 else {})}
+
     def minibatch_rows(self) -> ConnectorV2:
         """The learner connector piece that orders the buffer's rows for the iteration's minibatches:
         a shuffle (one pass over the buffer per iteration would otherwise cut consecutive steps
@@ -66,6 +73,7 @@ class OffPolicyConfig(SafeTaskConfig):
         pipeline = super().build_learner_connector(
             input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
         pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch())
-        pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch, AddCostsFromInfos())
+        pipeline.insert_after(AddNextObservationsFromEpisodesToTrainBatch,
+                              AddCostsFromInfos(constraints=self.constraints_data()))
         pipeline.insert_after(BatchIndividualItems, self.minibatch_rows())
         return pipeline

@@ -36,8 +36,8 @@ from ray.rllib.utils.metrics import (
 )
 
 from lac_rllib.constrained.algorithm import SafeAlgorithm
-from lac_rllib.constrained.costs import completed_episode_stats
-from lac_rllib.constrained.metrics import TS_EPISODE_COSTS, TS_ITERATION
+from lac_rllib.constrained.costs import completed_constraint_costs, completed_episode_stats
+from lac_rllib.constrained.metrics import TS_CONSTRAINT_COSTS, TS_EPISODE_COSTS, TS_ITERATION
 from lac_rllib.constrained.minibatch_loop import update_kwargs
 
 
@@ -57,6 +57,7 @@ class OnPolicySafeAlgorithm(SafeAlgorithm, PPO):
         # Before the update: the learner connector extends every chunk by a phantom step and marks
         # it truncated, so afterwards every chunk would look complete.
         returns, costs = completed_episode_stats(episodes)
+        constraint_costs = completed_constraint_costs(episodes)  # several constraints: each episode's K
 
         # minibatch_size None: full-batch epochs (RLlib then cycles minibatches of the batch's env
         # steps; the fused loop takes plans of a set size only).
@@ -73,6 +74,7 @@ class OnPolicySafeAlgorithm(SafeAlgorithm, PPO):
                     NUM_MODULE_STEPS_TRAINED_LIFETIME: self.metrics.peek(
                         (LEARNER_RESULTS, ALL_MODULES, NUM_MODULE_STEPS_TRAINED_LIFETIME), default=0),
                     TS_EPISODE_COSTS: costs,
+                    **({TS_CONSTRAINT_COSTS: constraint_costs} if constraint_costs else {}),
                     TS_ITERATION: self.iteration,
                 },
                 **passes,
@@ -83,4 +85,4 @@ class OnPolicySafeAlgorithm(SafeAlgorithm, PPO):
             self.env_runner_group.sync_weights(from_worker_or_learner_group=self.learner_group,
                                                policies=set(learner_results[0].keys()) - {ALL_MODULES},
                                                inference_only=True)
-        self.log_top_level(returns, costs)
+        self.log_top_level(returns, costs, constraint_costs)

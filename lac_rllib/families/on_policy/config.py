@@ -264,7 +264,8 @@ class OnPolicyConfig(SafeTaskConfig, PPOConfig):
         phantom step and appends the GAEs, learner.py)."""
         pipeline = super().build_learner_connector(
             input_observation_space=input_observation_space, input_action_space=input_action_space, device=device)
-        pipeline.insert_after(AddColumnsFromEpisodesToTrainBatch, AddCostsFromInfos())
+        pipeline.insert_after(AddColumnsFromEpisodesToTrainBatch,
+                              AddCostsFromInfos(constraints=self.constraints_data()))
         return pipeline
 
     @property
@@ -276,4 +277,6 @@ class OnPolicyConfig(SafeTaskConfig, PPOConfig):
                 # no multiplier (P3O, CPO, PCPO): ν stays 0
                 "nu_init": initial_nu({"nu_init": getattr(self, "nu_init", 0.0),
                                        "nu_fixed": getattr(self, "nu_fixed", None)}),
-                "normalize_actions": self.normalize_actions}
+                "normalize_actions": self.normalize_actions,
+                # several constraints: a cost critic and a multiplier each (absent: one)
+                **({"num_constraints": self.num_constraints} if self.num_constraints > 1 else {})}

@@ -20,10 +20,14 @@ rows (``LOSS_MASK``) only:
 
 The phantom row repeats the chunk's last info, so ``AddCostsFromInfos`` gave it that step's cost:
 it is set to 0 here, and the phantom rows' advantages too (the loss masks them anyway).
+
+With K constraints the costs, V_C, A^C and the targets are (B, K): each constraint's column goes
+through the same GAE apart, with its own critic (and is centred apart).
 """
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -96,12 +100,17 @@ class CostGAE(ConnectorV2):
                 values_t = module.compute_cost_values(columns)
             values = convert_to_numpy(values_t)
             mask = convert_to_numpy(columns[Columns.LOSS_MASK]).astype(bool)
-            advantages, targets = cost_gae(
-                convert_to_numpy(columns[COSTS]), values, convert_to_numpy(columns[Columns.TERMINATEDS]),
-                convert_to_numpy(columns[Columns.TRUNCATEDS]), mask, gamma=self.gamma, lambda_=self.lambda_,
-                standardize=self.standardize)
+            costs = convert_to_numpy(columns[COSTS])
+            gae = functools.partial(cost_gae, terminateds=convert_to_numpy(columns[Columns.TERMINATEDS]),
+                                    truncateds=convert_to_numpy(columns[Columns.TRUNCATEDS]), mask=mask,
+                                    gamma=self.gamma, lambda_=self.lambda_, standardize=self.standardize)
+            if costs.ndim == 1:
+                advantages, targets = gae(costs, values)
+            else:  # K constraints: each column apart
+                per = [gae(costs[:, k], values[:, k]) for k in range(costs.shape[1])]
+                advantages, targets = (np.stack(x, axis=-1) for x in zip(*per))
             out = {
-                COSTS: np.where(mask, convert_to_numpy(columns[COSTS]), 0.0).astype(np.float32),
+                COSTS: np.where(mask.reshape(-1, *[1] * (costs.ndim - 1)), costs, 0.0).astype(np.float32),
                 COST_ADVANTAGES: advantages,
                 COST_VALUE_TARGETS: targets,
                 Postprocessing.ADVANTAGES: standardize_on_mask(convert_to_numpy(columns[Postprocessing.ADVANTAGES]),

@@ -65,7 +65,9 @@ from lac_rllib.constrained.metrics import (  # noqa: F401 (the learner's keys, d
     EPOCHS_TRAINED,
     KL_FULL_BATCH,
     NU,
+    TS_CONSTRAINT_COSTS,
     TS_EPISODE_COSTS,
+    per_constraint,
 )
 from lac_rllib.constrained.minibatch_loop import FusedMinibatchLoop
 from lac_rllib.families.on_policy.cost_gae import COST_ADVANTAGES, COST_VALUE_TARGETS, CostGAE
@@ -140,17 +142,28 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
     @override(PPOTorchLearner)
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)
-        costs = list(timesteps.get(TS_EPISODE_COSTS) or [])
         for mid in self.module.keys():
+            several = self.config.get_config_for_module(mid).constraint_set
+            several = several if several is not None and len(several) > 1 else None
+            # With K constraints each entry is an episode's K costs, Ĵ_C their mean: K values.
+            costs = list(timesteps.get(TS_CONSTRAINT_COSTS if several else TS_EPISODE_COSTS) or [])
             window = self.cost_windows[mid]
             if window.maxlen is None:  # cost_window None: this iteration's episodes only [S]
                 window.clear()
             window.extend(costs)
-            j_c = float(np.mean(window)) if window else None  # no episode completed yet
+            j_c = None if not window else (np.mean(window, axis=0).tolist() if several else float(np.mean(window)))
             self.cost_window_means[mid] = j_c
             self.on_cost_window(mid, j_c)
-            self.metrics.log_dict({NU: float(self.module[mid].unwrapped().nu),
-                                   COST_WINDOW_MEAN: float("nan") if j_c is None else j_c}, key=mid, window=1)
+            nu = self.module[mid].unwrapped().nu
+            if several:  # each constraint's ν_k and Ĵ_Ck; ν itself reports the largest
+                self.metrics.log_dict({
+                    NU: float(nu.max()),
+                    **{per_constraint(NU, n): float(v) for n, v in zip(several.names, nu.tolist())},
+                    **{per_constraint(COST_WINDOW_MEAN, n): float("nan") if j_c is None else j_c[k]
+                       for k, n in enumerate(several.names)}}, key=mid, window=1)
+            else:
+                self.metrics.log_dict({NU: float(nu), COST_WINDOW_MEAN: float("nan") if j_c is None else j_c},
+                                      key=mid, window=1)
             self.progress[mid] = EpochProgress()
 
     def on_cost_window(self, module_id, j_c: float | None) -> None:
@@ -177,7 +190,7 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         loss = super().compute_loss_for_module(module_id=module_id, config=config, fwd_out=fwd_out,
                                                batch={**batch, Postprocessing.ADVANTAGES: advantages})
         mask = batch[Columns.LOSS_MASK]
-        cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[mask].mean()
+        cost_vf_loss = cost_critic_loss(module.compute_cost_values(batch), batch[COST_VALUE_TARGETS], mask)
         loss = loss + config.vf_loss_coeff * cost_vf_loss
         if config.critic_l2:
             loss = loss + config.critic_l2 * sum((p**2).sum() for p in critic_parameters(module))
@@ -230,7 +243,7 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
         loss = masked_mean(per_row)
         if policy_term is not None:
             loss = loss + policy_term
-        cost_vf_loss = ((module.compute_cost_values(batch) - batch[COST_VALUE_TARGETS]) ** 2)[rows].mean()
+        cost_vf_loss = cost_critic_loss(module.compute_cost_values(batch), batch[COST_VALUE_TARGETS], rows)
         loss = loss + config.vf_loss_coeff * cost_vf_loss
         # critic_l2·Σθ² [O use_critic_norm] is not in this graph: compute_gradients adds its
         # gradient critic_l2·2θ after the backward pass (its value to the reported loss only).
@@ -396,6 +409,13 @@ def full_batch_kl(module, columns: dict) -> float:
     old = dist.from_logits(columns[Columns.ACTION_DIST_INPUTS])
     new = dist.from_logits(module.action_dist_inputs(columns[Columns.OBS]))
     return float(old.kl(new)[columns[Columns.LOSS_MASK]].mean())
+
+
+def cost_critic_loss(values: torch.Tensor, targets: torch.Tensor, rows) -> torch.Tensor:
+    """The cost critic's MSE over the real ``rows`` (a mask or their indices); with K constraints
+    (values (B, K)) the sum of the K critics' MSEs, each critic's loss as if it were alone."""
+    squared = (values - targets) ** 2
+    return squared[rows].mean() if squared.dim() == 1 else squared[rows].mean(0).sum()
 
 
 def critic_parameters(module) -> list:

@@ -6,8 +6,11 @@ critic and the multiplier ν (0 for ever in the algorithms without one: P3O, CPO
 - ``encoder.critic_encoder`` + ``vf``: the reward critic V_R, a separate MLP of the same shape
   (``vf_share_layers=False``) [O, S];
 - ``cost_vf``: the cost critic V_C, a third MLP of that shape, built by the same RLlib catalog;
+  with K > 1 constraints (``num_constraints``), K of them, V_C(s) then (B, K) [as OmniSafe keeps a
+  cost critic per cost; Kim et al. 2024 a cost value head per constraint];
 - ``nu``: the Lagrange multiplier ν, a buffer (it travels with the weights into checkpoints and
-  to the env runners). Only a learner's ``LagrangeMultiplier`` writes it (lagrangian.py).
+  to the env runners), (K,) with K constraints. Only a learner's ``LagrangeMultiplier`` writes it
+  (lagrangian.py).
 
 Only the policy (and ν) exist on env runners: both critics are non-inference attributes.
 """
@@ -37,6 +40,17 @@ class CostCritic(torch.nn.Module):
         return self.head(self.encoder({Columns.OBS: obs})[ENCODER_OUT]).squeeze(-1)
 
 
+class CostCritics(torch.nn.Module):
+    """K cost critics V_Ck(s), one per constraint, each a :class:`CostCritic`: (B, K)."""
+
+    def __init__(self, catalog, k: int):
+        super().__init__()
+        self.critics = torch.nn.ModuleList(CostCritic(catalog) for _ in range(k))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return torch.stack([critic(obs) for critic in self.critics], dim=-1)
+
+
 class OnPolicyTorchRLModule(DefaultPPOTorchRLModule):
     @override(DefaultPPOTorchRLModule)
     def setup(self):
@@ -45,13 +59,15 @@ class OnPolicyTorchRLModule(DefaultPPOTorchRLModule):
         if cfg.get("vf_share_layers"):
             raise ValueError("the on-policy family needs separate networks (vf_share_layers=False): one optimizer "
                              "per network")
-        self.register_buffer("nu", torch.tensor(initial_nu(cfg)))
+        k = int(cfg.get("num_constraints", 1))
+        self.register_buffer("nu", torch.tensor(initial_nu(cfg)) if k == 1 else torch.full((k,), initial_nu(cfg)))
         with torch.no_grad():  # RLlib starts the free log σ at 0 [O]; [S] at −0.5
             self.pi.log_std.fill_(float(cfg["log_std_init"]))
-        self.cost_vf = CostCritic(self.catalog)  # deleted again on env runners (inference-only)
+        # deleted again on env runners (inference-only)
+        self.cost_vf = CostCritic(self.catalog) if k == 1 else CostCritics(self.catalog, k)
 
     def compute_cost_values(self, batch: dict[str, Any]) -> torch.Tensor:
-        """V_C(s) of every row of ``batch`` (B,)."""
+        """V_C(s) of every row of ``batch``: (B,), (B, K) with K constraints."""
         return self.cost_vf(batch[Columns.OBS])
 
     def action_dist_inputs(self, obs: torch.Tensor) -> torch.Tensor:
