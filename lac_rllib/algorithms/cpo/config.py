@@ -84,6 +84,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 class CPOConfig(TrustRegionConfig):
     """Config for :class:`lac_rllib.algorithms.cpo.algorithm.CPO`; fields: :class:`CPOParams`."""
 
+    # K constraints: CPO's step with a dual variable each, PCPO's projection onto their intersection
+    # (lac_rllib/families/trust_region/multi_constraint.py).
+    SEVERAL_CONSTRAINTS = True
+
     ALGO = "cpo"
     OMNISAFE_NAME = "CPO"  # its implementation in OmniSafe 0.5.0 (benchmarks/peers.py)
     PARAMS, FIELDS, PRESETS = CPOParams, fields.FieldSet(CPOParams, "CPO"), PRESETS

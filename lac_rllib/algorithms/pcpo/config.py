@@ -45,7 +45,8 @@ class PCPOParams(CostStepParams):
     the action's dimensions: on the summed KL, kl_convention="sum", the reward step is divided by
     act_dim, as [O]'s δ and q would make it); with the ``omnisafe`` preset it is [O]'s step exactly
     (tests/algorithms/pcpo/test_pcpo_golden.py). Before that division (and with η·g for η·Hx) the
-    reward step was act_dim times [O]'s on the default KL."""
+    reward step was act_dim times [O]'s on the default KL. With several constraints (``constraints``)
+    "omnisafe", a one-constraint step, projects as "kl" does."""
     backtrack_iters: int = param(200, accepts=INT_GE_1)
     """Fractions 1, c, c², … of the step the line search tries before it keeps θ_old [O
     _update_actor: total_steps=200]."""

@@ -7,11 +7,15 @@ projected onto {Δ: c + bᵀΔ ≤ 0} (``projection``: the KL metric [P], the Eu
 then CPO's line search as [O] calls it for PCPO: case 0, so the reward's loss may rise, the cost
 surrogate by at most max(−c, 0), and KL̄ ≤ δ [O pcpo.py:111-124, 200 tries]. ``nu`` reports the
 projection's coefficient, 0 when the reward's step is feasible.
+
+With K constraints the reward step is projected onto the intersection of the K half-spaces
+(multi_constraint.py ``pcpo_step_several``; ``projection`` "kl" or "l2"), ν one coefficient each.
 """
 
 from __future__ import annotations
 
 from lac_rllib.algorithms.cpo.learner import CPOTorchLearner
+from lac_rllib.families.trust_region.multi_constraint import pcpo_step_several
 from lac_rllib.families.trust_region.step import pcpo_step
 
 
@@ -21,3 +25,11 @@ class PCPOTorchLearner(CPOTorchLearner):
         out = pcpo_step(g, b, x, p, c, max_kl, metric=config.projection, q=float(x @ hx), hx=hx,
                         kl_dims=policy.kl_dims)
         return out.step_direction, out.nu, 0, {}
+
+    def constrained_step_several(self, config, g, B, x, P, c, max_kl, q):
+        """PCPO's projection onto the K half-spaces' intersection; its line search as case 0 (the loss
+        may rise) [O pcpo.py:111-124]."""
+        # [O]'s variant is a one-constraint step; with several its projection is the KL one [P].
+        metric = "kl" if config.projection == "omnisafe" else config.projection
+        out = pcpo_step_several(g, B, x, P, c, max_kl, metric=metric, q=q)
+        return out.step_direction, out.nu, True, 0

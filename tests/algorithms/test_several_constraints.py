@@ -1,0 +1,51 @@
+"""Several constraints at once, for every algorithm, on ``lac/PointTwoCosts-v0`` (the tiny task with
+two costs, hazard and lane): the lane's limit binds (the first policies pay ~95 an episode above
+the x axis, its limit 10) and the hazard's is slack (1000: never reached). Each algorithm's
+multiplier for the lane (CPO's and PCPO's dual variable ν*, P3O's penalty weight) rises, the lane's
+cost comes under its limit (the mean of the last 3 iterations), and the hazard's multiplier stays
+at 0: each constraint is held by its own multiplier. Seed 0, 10 iterations of the tiny preset
+(5-12 s each here)."""
+
+import numpy as np
+import pytest
+
+from lac_rllib.algorithms import registry
+from lac_rllib.constrained.metrics import COST_LIMIT, EPISODE_COST, FEASIBLE, NU, iteration_row, per_constraint
+
+TASK = "lac/PointTwoCosts-v0"
+LIMITS = {"hazard": 1000.0, "lane": 10.0}
+TAIL, ITERATIONS = 3, 10
+#: Fields set beside: RESPO's ν₀ is softplus(0.25) and its rate 5e-5 [G], so its ν starts at 0 and
+#: steps as PPO-Lag's can; SAC-Lag's λ steps after 2 iterations (not 5) and it makes a quarter of its
+#: gradient steps (the test's time).
+SETS = {"respo": {"nu_init": 0.0, "nu_parametrization": "direct", "lagrangian_lr": 0.05},
+        "sac_lag": {"warmup_env_steps": 2000, "updates_per_env_step": 0.25}}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", list(registry.ALGOS))
+def test_the_binding_constraint_is_held_and_the_slack_one_left_alone(ray_session, algo):
+    config = registry.build_config(algo, TASK, 0, {"constraints": LIMITS, **SETS.get(algo, {})}, timesteps=100_000)
+    assert config.num_constraints == 2
+    algo_obj = config.build_algo()
+    try:
+        rows = [iteration_row(algo_obj.train()) for _ in range(ITERATIONS)]
+    finally:
+        algo_obj.stop()
+    # The first row of an off-policy algorithm may precede its learner's first update (no ν yet).
+    nu_lane = [r[per_constraint(NU, "lane")] for r in rows if per_constraint(NU, "lane") in r]
+    nu_hazard = [r[per_constraint(NU, "hazard")] for r in rows if per_constraint(NU, "hazard") in r]
+    lane = [r[per_constraint(EPISODE_COST, "lane")] for r in rows]
+    hazard = [r[per_constraint(EPISODE_COST, "hazard")] for r in rows]
+    assert len(nu_lane) >= ITERATIONS - 2 and len(nu_hazard) == len(nu_lane)
+    assert max(nu_lane) > 0.05, f"the lane's multiplier never rose: {nu_lane}"
+    assert all(v <= 1e-6 for v in nu_hazard), f"the hazard's multiplier moved though its limit is slack: {nu_hazard}"
+    assert max(lane[:2]) > 3 * LIMITS["lane"], f"the lane's limit did not bind at first: {lane}"
+    tail = float(np.mean(lane[-TAIL:]))
+    assert tail <= LIMITS["lane"], f"the lane's cost {tail:.1f} is over its limit ({lane})"
+    assert max(hazard) < LIMITS["hazard"]
+    # feasible is the joint rule (every constraint within its limit); the summed cost is reported beside
+    last = rows[-1]
+    assert last[FEASIBLE] == float(lane[-1] <= LIMITS["lane"] and hazard[-1] <= LIMITS["hazard"])
+    assert last[EPISODE_COST] == pytest.approx(lane[-1] + hazard[-1], rel=1e-6)
+    assert last[per_constraint(COST_LIMIT, "lane")] == LIMITS["lane"]
