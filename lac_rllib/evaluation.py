@@ -90,6 +90,15 @@ class Policy:
     metadata: dict                # the whole rllib_checkpoint.json
 
     @property
+    def constraint_set(self):
+        """The run's constraints and limits (its ``constraints`` field), or None: one on ``info["cost"]``."""
+        from lac_rllib.tasks import get_task
+        from lac_rllib.tasks.constraints import select
+
+        limits = self.algo_config.get("constraints")
+        return None if not limits else select(get_task(self.task_id).constraints, limits, task_id=self.task_id)
+
+    @property
     def algo(self) -> str:
         """The algorithm that wrote the checkpoint (lac_rllib/algorithms/registry.py)."""
         from lac_rllib.algorithms.registry import DEFAULT_ALGO
@@ -481,6 +490,7 @@ class _Lane:
     cost: float = 0.0
     t: int = 0
     done: bool = False
+    constraint_costs: Any = None  # with constraints: each one's episode cost so far
 
 
 class _Envs:
@@ -523,7 +533,10 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
 
     Returns per-episode ``returns``/``costs``/``lengths``, ``return_mean``/``return_std``,
     ``cost_mean``/``cost_std`` (std over episodes, ddof 0), ``cost_limit``,
-    ``within_limit_fraction`` (episodes with cost ≤ b), and for a mode of the module's own its
+    ``within_limit_fraction`` (episodes with cost ≤ b); a run with ``constraints``, ``constraints``:
+    name → that constraint's ``costs``, ``cost_mean``, ``cost_std``, ``cost_limit`` and
+    ``within_limit_fraction``, and ``within_all_limits_fraction`` (episodes within every limit: the
+    joint rule; with one constraint ``costs`` are its own); and for a mode of the module's own its
     diagnostics' means over all visited states and ``evaluation_info`` (LAC's ``"langevin"``:
     ``energy_generator_mean`` (E at the chain start ã₀ ~ π_φ'), ``energy_refined_mean`` (E at
     ã_T), ``action_displacement_mean``; T, η and ν). ``langevin_steps``/``langevin_step_size``
@@ -548,7 +561,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
     if options and actions == GENERATOR:
         raise ValueError("langevin_steps/langevin_step_size are options of a chain mode, not of actions='generator'")
 
-    module, gamma_c = policy.module, policy.episode_cost_discount
+    module, gamma_c, several = policy.module, policy.episode_cost_discount, policy.constraint_set
     low, high = policy.action_low, policy.action_high
     env, video_notice, videos = None, None, []
     if video_dir is not None:
@@ -565,7 +578,7 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
     fps = float((env.metadata or {}).get("render_fps") or 30)
     video = video_notice is None and video_dir is not None  # one env then (width 1), an episode at a time
 
-    returns, costs, lengths = [], [], []
+    returns, costs, lengths, per_constraint = [], [], [], []
     diagnostics: dict[str, list[float]] = {}
     bar = _Progress(episodes, f"eval {actions}", progress)
     rng_state = torch.random.get_rng_state()  # the stochastic mode seeds torch per episode; restored after
@@ -580,7 +593,8 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
                                                observation_space=policy.env_to_module.input_observation_space,
                                                action_space=policy.env_to_module.input_action_space),
                     generator=torch.Generator().manual_seed(seed + first + k),  # a mode's noise
-                    rng=torch.random.get_rng_state()))
+                    rng=torch.random.get_rng_state(),
+                    constraint_costs=None if several is None else np.zeros(len(several))))
             while not all(lane.done for lane in group):
                 chosen = {}
                 for k, lane in enumerate(group):
@@ -607,7 +621,12 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
                 for k, (obs, reward, terminated, truncated, info) in envs.step(chosen).items():
                     lane = group[k]
                     lane.ret += float(reward)
-                    lane.cost += gamma_c**lane.t * step_cost(info)  # the task's convention, as in training
+                    if several is None:
+                        lane.cost += gamma_c**lane.t * step_cost(info)  # the task's convention, as in training
+                    else:  # each constraint's cost; with one, that is the run's cost, as in training
+                        lane.constraint_costs += gamma_c**lane.t * several.step_costs(info)
+                        lane.cost += gamma_c**lane.t * (step_cost(info) if len(several) > 1
+                                                        else float(several.step_costs(info)[0]))
                     lane.t += 1
                     lane.done = bool(terminated or truncated)
                     lane.episode.add_env_step(obs, chosen[k], float(reward), infos=info,
@@ -617,6 +636,8 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
                 returns.append(lane.ret)
                 costs.append(lane.cost)
                 lengths.append(lane.t)
+                if several is not None:
+                    per_constraint.append(lane.constraint_costs.tolist())
                 if recorder is not None:
                     recorder.capture(lane.t, force=True)
                     videos.append(_write_video(recorder.frames, os.path.join(
@@ -639,6 +660,15 @@ def evaluate(policy: Policy, episodes: int, seed: int, actions: str = GENERATOR,
         "within_limit_fraction": float(np.mean([c <= limit for c in costs])),
         "videos": videos, "video_notice": video_notice,
     }
+    if several is not None:
+        table = np.asarray(per_constraint, dtype=float).reshape(len(per_constraint), len(several))
+        result["constraints"] = {}
+        for k, (name, b) in enumerate(zip(several.names, several.limits)):
+            mean, std = _stats(table[:, k].tolist())
+            result["constraints"][name] = {
+                "costs": table[:, k].tolist(), "cost_mean": mean, "cost_std": std, "cost_limit": b,
+                "within_limit_fraction": float(np.mean(table[:, k] <= b))}
+        result["within_all_limits_fraction"] = float(np.mean((table <= np.asarray(several.limits)).all(axis=1)))
     if actions not in (GENERATOR, STOCHASTIC):  # the module's own mode: what it ran with
         result.update(module.evaluation_info(actions, **options))
         result.update({f"{name}_mean": float(np.mean(values)) for name, values in diagnostics.items()})

@@ -227,6 +227,13 @@ def log_eval_to_run(client, run_id: str, result: dict, step: int = 0) -> list[st
     mode, now = result["actions"], int(time.time() * 1000)
     metrics = [Metric(f"{EVAL_PREFIX}/{mode}/{k}", float(result[k]), now, int(step))
                for k in LOGGED_KEYS if k in result and result[k] is not None]
+    # Several constraints: each one's cost, limit and share of episodes within it, and the joint share.
+    metrics += [Metric(f"{EVAL_PREFIX}/{mode}/{k}/{name}", float(c[k]), now, int(step))
+                for name, c in (result.get("constraints") or {}).items()
+                for k in ("cost_mean", "cost_std", "cost_limit", "within_limit_fraction")]
+    if "within_all_limits_fraction" in result:
+        metrics.append(Metric(f"{EVAL_PREFIX}/{mode}/within_all_limits_fraction",
+                              float(result["within_all_limits_fraction"]), now, int(step)))
     tags = [RunTag(f"lac.eval.{mode}.episodes", str(result["episodes"])),
             RunTag(f"lac.eval.{mode}.seed", str(result["seed"]))]
     if mode == "langevin":
@@ -262,11 +269,18 @@ def format_human(result: dict, source: str) -> str:
         f"cost limit     {result['cost_limit']:g}",
         f"within limit   {result['within_limit_fraction']:.0%} ({inside}/{n} episodes)",
     ]
+    for name, c in (result.get("constraints") or {}).items():
+        lines.append(f"  {name:<12} {_pm(c['cost_mean'], c['cost_std'])}  limit {c['cost_limit']:g}  "
+                     f"within {c['within_limit_fraction']:.0%}")
+    if "within_all_limits_fraction" in result:
+        lines.append(f"within all     {result['within_all_limits_fraction']:.0%} (every constraint within its limit)")
     if result["actions"] == "langevin":
+        nu = result["nu"]
+        nu = ", ".join(f"{v:.3g}" for v in nu) if isinstance(nu, list) else f"{nu:.3g}"
         lines.append(
             f"energy         generator (chain start) {result['energy_generator_mean']:.4g} -> refined "
             f"{result['energy_refined_mean']:.4g}  (T={result['langevin_steps']}, "
-            f"eta={result['langevin_step_size']:g}, nu={result['nu']:.3g})")
+            f"eta={result['langevin_step_size']:g}, nu={nu})")
     for path in result.get("videos") or []:
         lines.append(f"video          {path}")
     return "\n".join(lines)

@@ -59,6 +59,12 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
             raise ValueError(f"--set {algo_pairs[-1]}: {path.name} sweeps algo itself ({list(swept_algos(base))}); "
                              "accepted: --set of fields every algorithm it runs has")
         data["algo"] = [algo]
+    # --set constraints.NAME=b: one limit of the file's constraints (or a new one), the rest kept.
+    limits = {name.partition(".")[2]: cli_sets.pop(name) for name in list(cli_sets) if name.startswith("constraints.")}
+    if isinstance(cli_sets.get("constraints"), dict):
+        limits = {**cli_sets.pop("constraints"), **limits}
+    if limits:
+        data["constraints"] = {**(data.get("constraints") or {}), **limits}
     data["set"] = {**data.get("set", {}), **cli_sets}
     for key in ("num_samples", "scheduler", "max_concurrent", "cpus_per_trial", "experiment", "cost_limits"):
         if getattr(args, key) is not None:
@@ -74,6 +80,8 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
         data["tune"] = tune
     flags = {(k,): f for k, f in FLAG_OF.items() if getattr(args, k) is not None} | tune_flags
     flags |= {("set", k): f"--set {k}" for k in cli_sets}
+    if limits:
+        flags[("constraints",)] = "--set constraints"
     if algo_pairs:
         flags[("algo",)] = f"--set {ALGO_FIELD}"
     if args.seeds is not None:

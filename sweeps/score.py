@@ -14,6 +14,12 @@ the frontier, the importances, the confirmation, the table and what Optuna is to
 declared score; the other score and the last iteration's values stay beside it (trials.csv,
 summary.csv). A trial whose evaluation failed or did not run is scored on ``train`` and says so
 (tag ``lac.score``; the reports count such trials).
+
+With several constraints (a run's ``constraints``) a trial's score cost is the joint rule's,
+max_k (J_k − b_k) over its constraints' costs J_k (the same score, train or eval, each) and limits
+b_k, against a limit of 0: within exactly where every constraint is within its limit, so the one
+feasibility rule (sweeps/objective.py) decides every verdict on the joint rule. Each constraint's
+score cost stays beside it (``score_cost/NAME``, ``cost/NAME`` in trials.csv).
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import math
 
 import pandas as pd
 
-from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN
+from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, per_constraint
 
 #: The fraction of a trial's env steps, at its end, whose iterations the train score averages.
 TAIL = 0.10
@@ -95,3 +101,55 @@ def declared(kind: str, train: tuple[float, float], evaluated: tuple[float, floa
     if kind == EVAL and all(math.isfinite(v) for v in evaluated):
         return evaluated, EVAL
     return train, TRAIN
+
+
+def constraint_limits(metrics: dict) -> dict[str, float]:
+    """name → b of a run with several constraints, read from its metrics (``cost_limit/NAME``, every
+    iteration's row logs them); empty for a run with one constraint."""
+    prefix = f"{COST_LIMIT}/"
+    return {k[len(prefix):]: float(v) for k, v in sorted(metrics.items()) if k.startswith(prefix)}
+
+
+def constraint_scores(kind: str, curve: pd.DataFrame | None, metrics: dict, limits: dict[str, float]
+                      ) -> tuple[dict[str, float], str]:
+    """(name → the constraint's score cost, the score used): each constraint's eval cost
+    (``eval/generator/cost_mean/NAME``) where ``kind`` is eval and every one is there, else its train
+    cost (the tail mean of its ``episode_cost/NAME`` curve)."""
+    evaluated = {n: metrics.get(per_constraint(EVAL_COST_KEY, n)) for n in limits}
+    if kind == EVAL and all(v is not None and math.isfinite(v) for v in evaluated.values()):
+        return {n: float(v) for n, v in evaluated.items()}, EVAL
+    out = {}
+    for name in limits:
+        column = per_constraint(EPISODE_COST, name)
+        if curve is None or column not in curve or not len(curve):
+            out[name] = math.nan
+            continue
+        out[name] = train_score(curve.rename(columns={EPISODE_COST: "_summed", column: EPISODE_COST}))[1]
+    return out, TRAIN
+
+
+def joint_cost(costs: dict[str, float], limits: dict[str, float]) -> float:
+    """The joint rule's cost max_k (J_k − b_k), to be held to a limit of 0 (NaN if any J_k is)."""
+    excess = [costs[n] - b for n, b in limits.items()]
+    return math.nan if any(math.isnan(e) for e in excess) else max(excess)
+
+
+def joint_score(kind: str, curve: pd.DataFrame | None, metrics: dict, limits: dict[str, float]
+                ) -> tuple[tuple[float, float], str, dict[str, float]]:
+    """A trial with several constraints: ((return, joint cost), the score used, name → its cost),
+    return and costs from the same score (eval where every one of them is there, else train)."""
+    train, evaluated = train_score(curve), eval_score(metrics)
+    (ret, _), used = declared(kind, train, evaluated)
+    per, used_costs = constraint_scores(used, curve, metrics, limits)
+    if used_costs != used:  # an eval return without every constraint's eval cost: all on train
+        ret, used = train[0], TRAIN
+    return (ret, joint_cost(per, limits)), used, per
+
+
+def row_cost(row: dict) -> tuple[float, float]:
+    """(cost, limit) an iteration's row is judged by: its episode cost and limit, or with several
+    constraints the joint rule's max_k (J_k − b_k) and 0 (``episode_cost/NAME``, ``cost_limit/NAME``)."""
+    limits = constraint_limits(row)
+    if len(limits) < 2:
+        return row[EPISODE_COST], row[COST_LIMIT]
+    return joint_cost({n: row.get(per_constraint(EPISODE_COST, n), math.nan) for n in limits}, limits), 0.0

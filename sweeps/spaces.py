@@ -307,11 +307,14 @@ def tune_search_space(search: dict) -> dict:
 
 
 def trial_sets(sweep) -> dict:
-    """What every trial sets: the sweep's ``set``, and its algorithm when it runs one baseline."""
+    """What every trial sets: the sweep's ``set`` and ``constraints``, and its algorithm when it runs one
+    baseline."""
     from lac_rllib.algorithms.registry import ALGO_FIELD
     from sweeps.sweep_file import to_field_value
 
     sets = {k: to_field_value(v) for k, v in sweep.set.items()}
+    if sweep.constraints is not None:  # a limit per constraint: the field every algorithm has
+        sets["constraints"] = {name: float(b) for name, b in sweep.constraints.items()}
     if len(sweep.algo) == 1 and sweep.algo[0] != DEFAULT_ALGO:
         sets[ALGO_FIELD] = sweep.algo[0]
     return sets

@@ -482,6 +482,12 @@ class SweepFile(BaseModel):
     "Across a ladder of cost limits"); ``lac-sweep calibrate`` proposes one. Default: each task's limit."""
     frontier: Frontier | None = None
     """The fixed-multiplier frontier's runs beside the sweep's own (:class:`Frontier`)."""
+    constraints: dict[Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,60}$")], NonNegative] | None = (
+        Field(None, min_length=1, max_length=MAX_VALUES))
+    """A limit per constraint of the task (``{hazards: 10, vases: 5}``; each task's constraints:
+    docs/tasks.md, a user env's its ``constraints``): every trial holds each constraint under its own
+    limit with its own multiplier (docs/constraints.md); ``--set constraints.NAME=b`` on the command
+    line. Without it, one limit on the summed cost (``cost_limit``, the task's by default)."""
     tune: TuneSpec | None = None
     """A tuned comparison (sweeps/tuned.py): every algorithm the sweep runs is searched over its own
     search space with the same searcher, samples, seeds and env steps, its best configuration and its
@@ -559,6 +565,13 @@ class SweepFile(BaseModel):
             key = "cost_limits" if self.cost_limits is not None else "frontier"
             raise KeyedError((key,), f"{key} with a search: a ladder and a frontier run grid configurations; "
                              "accepted: with grid or groups (or none: one configuration)")
+        if self.constraints is not None:
+            for key, clash in (("cost_limit", "cost_limit" in self.set), ("constraints", "constraints" in self.set),
+                               ("cost_limits", self.cost_limits is not None), ("frontier", self.frontier is not None)):
+                if clash:
+                    raise KeyedError(("constraints",), f"constraints with {key}: constraints give each constraint its "
+                                     "limit; accepted: constraints alone (one limit on the summed cost: cost_limit; a "
+                                     "ladder or a frontier runs on one constraint for now)")
         if self.cost_limits is not None and "cost_limit" in self.set:
             raise KeyedError(("set", "cost_limit"), "cost_limit set beside cost_limits; accepted: one of them "
                              "(a ladder of one limit: cost_limits: [b])")

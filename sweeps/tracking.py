@@ -113,21 +113,33 @@ def local_artifact_root(uri: str) -> str | None:
     return None
 
 
-def learning_curve(client, run_id: str, cost_limit: float):
+def learning_curve(client, run_id: str, cost_limit: float, constraints: tuple[str, ...] = ()):
     """A trial's learning curve from its run's metric histories, one row per logged iteration:
     env_steps (the step), episode_return, episode_cost, the trial's ``cost_limit``, and ν, ν's bound
-    (where the algorithm logs one) and the training's cost rate, by step (a DataFrame; what the
+    (where the algorithm logs one), the training's cost rate and, with several ``constraints``, each
+    one's episode_cost/NAME and nu/NAME, by step (a DataFrame; what the
     trial's learning_curve.png, the sweep's learning_curves.png and the multiplier's behaviour,
     sweeps/reports/multiplier.py, are drawn from)."""
     import pandas as pd
 
-    from lac_rllib.constrained.metrics import COST_LIMIT, COST_RATE, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, NU, NU_MAX
+    from lac_rllib.constrained.metrics import (
+        COST_LIMIT,
+        COST_RATE,
+        ENV_STEPS,
+        EPISODE_COST,
+        EPISODE_RETURN,
+        NU,
+        NU_MAX,
+        per_constraint,
+    )
 
     returns = client.get_metric_history(run_id, EPISODE_RETURN)
     costs = client.get_metric_history(run_id, EPISODE_COST)
     curve = pd.DataFrame({ENV_STEPS: [m.step for m in returns], EPISODE_RETURN: [m.value for m in returns],
                           EPISODE_COST: [m.value for m in costs[:len(returns)]], COST_LIMIT: cost_limit})
-    for key in (NU, NU_MAX, COST_RATE):
+    # Several constraints: each one's cost and multiplier (``constraints``: their names).
+    own = [per_constraint(key, name) for name in constraints for key in (EPISODE_COST, NU)]
+    for key in (NU, NU_MAX, COST_RATE, *own):
         by_step = {m.step: m.value for m in client.get_metric_history(run_id, key)}
         curve[key] = curve[ENV_STEPS].map(by_step).astype(float)
     return curve

@@ -24,7 +24,6 @@ from lac_rllib.algorithms.registry import add_module_dir, build_config, split_al
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
     ENV_STEPS,
-    EPISODE_COST,
     EPISODE_RETURN,
     ITERATION,
     iteration_row,
@@ -44,6 +43,8 @@ from sweeps.score import (
     TRAIN_RETURN,
     declared,
     eval_score,
+    joint_score,
+    row_cost,
     train_score,
 )
 from sweeps.seeds import EVAL_SEED_BASE, check_streams, eval_seed  # noqa: F401 (EVAL_SEED_BASE: named here before)
@@ -170,8 +171,9 @@ class SweepTrial(tune.Trainable):
             bad = non_finite(metrics)
             if bad:
                 raise FloatingPointError(f"non-finite {', '.join(bad)} at iteration {self.iteration + 1}")
-            metrics[OBJECTIVE] = objective(metrics[EPISODE_RETURN], metrics[EPISODE_COST], metrics[COST_LIMIT])
-            metrics[CONSTRAINT] = metrics[EPISODE_COST] - metrics[COST_LIMIT]  # ≤ 0 is feasible
+            cost, limit = row_cost(metrics)  # the joint rule's with several constraints (sweeps/score.py)
+            metrics[OBJECTIVE] = objective(metrics[EPISODE_RETURN], cost, limit)
+            metrics[CONSTRAINT] = cost - limit  # ≤ 0 is feasible
             metrics[WALL_TIME_S] = float(r.get(TIME_TOTAL_S, 0.0))
             done = metrics[ENV_STEPS] >= self.timesteps
             if metrics[ENV_STEPS] > self.logged_up_to:
@@ -187,8 +189,9 @@ class SweepTrial(tune.Trainable):
                 # Tune's last result (what Optuna is told) carries the trial's score (sweeps/score.py).
                 score = self._finish_run(int(metrics[ENV_STEPS]))
                 metrics.update(score)
+                metrics[COST_LIMIT] = limit  # what the score's cost is held to (0: the joint rule's)
                 if all(math.isfinite(v) for v in score.values()):
-                    metrics[OBJECTIVE] = objective(score[SCORE_RETURN], score[SCORE_COST], metrics[COST_LIMIT])
+                    metrics[OBJECTIVE] = objective(score[SCORE_RETURN], score[SCORE_COST], limit)
                 elif metrics[ENV_STEPS] > self.logged_up_to:  # no score: the last iteration's, as every other
                     self.tracker.log_metrics({OBJECTIVE: metrics[OBJECTIVE]}, step=int(metrics[ENV_STEPS]))
             return {**metrics, "done": done}
@@ -212,7 +215,10 @@ class SweepTrial(tune.Trainable):
             # checks one against the other (sweeps/integrity.py).
             self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
             self.tracker.log_artifacts(os.path.join(tmp, "checkpoint"), "checkpoint")
-            curve = learning_curve(self.tracker.client, self.tracker.run_id, self.algo_config.effective_cost_limit)
+            several = self.algo_config.constraint_set
+            names = several.names if several is not None and len(several) > 1 else ()
+            curve = learning_curve(self.tracker.client, self.tracker.run_id, self.algo_config.effective_cost_limit,
+                                   names)
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
         train = train_score(curve)
@@ -222,10 +228,16 @@ class SweepTrial(tune.Trainable):
         except Exception:  # the store away: ranked on train, and the tag says so
             metrics = {}
         (ret, cost), used = declared(self.config.get("score", SCORES[0]), train, eval_score(metrics))
+        limit, per = self.algo_config.effective_cost_limit, {}
+        if names:  # several constraints: the joint rule's cost max_k (J_k − b_k), held to 0 (sweeps/score.py)
+            limits = dict(zip(names, several.limits))
+            (ret, cost), used, per = joint_score(self.config.get("score", SCORES[0]), curve, metrics, limits)
+            limit = 0.0
         score = {SCORE_RETURN: ret, SCORE_COST: cost}
         # The run's final objective is its score's (what it is ranked on, and what Optuna is told).
-        final = objective(ret, cost, self.algo_config.effective_cost_limit) if math.isfinite(ret + cost) else math.nan
+        final = objective(ret, cost, limit) if math.isfinite(ret + cost) else math.nan
         logged = {k: v for k, v in {**score, TRAIN_RETURN: train[0], TRAIN_COST: train[1], OBJECTIVE: final,
+                                    **{f"{SCORE_COST}/{n}": c for n, c in per.items()},
                                     **behaviour}.items() if math.isfinite(v)}
         if logged:
             self.tracker.log_metrics(logged, step=int(curve[ENV_STEPS].max()))

@@ -381,3 +381,30 @@ def test_a_batched_task_plays_its_episodes_together_as_one_env_plays_them(ray_se
         assert together["lengths"] == alone["lengths"] == [40] * 3
         assert together["returns"] == alone["returns"] and together["costs"] == alone["costs"]
         assert len(set(together["returns"])) == 3  # three different episodes
+
+
+def test_a_checkpoint_with_several_constraints_evaluates_each(ray_session, tmp_path):
+    """LAC trained with a limit per constraint on lac/PointTwoCosts-v0 restores, and its evaluation
+    reports each constraint's episode costs (they sum to the summed cost there), limit and share of
+    episodes within, and the share within both; lac-eval prints a line per constraint."""
+    from lac_rllib.algorithms.lac.config import LACConfig
+    from lac_rllib.train import train
+    from sweeps.evaluate import format_human
+
+    config = LACConfig.build("lac/PointTwoCosts-v0", 0, {"env_steps_per_iteration": 500, "replay_capacity": 2000,
+                                                         "random_iterations": 1,
+                                                         "constraints": {"hazard": 2.0, "lane": 10.0}},
+                             timesteps=1000)
+    train(config, 1000, str(tmp_path / "run"), log=lambda *a, **k: None)
+    policy = restore_policy(str(tmp_path / "run" / "checkpoint"))
+    assert policy.module.nu.shape == (2,) and policy.constraint_set.names == ("hazard", "lane")
+    result = evaluate(policy, 3, seed=5, progress=False)
+    hazard, lane = result["constraints"]["hazard"], result["constraints"]["lane"]
+    assert [h + la for h, la in zip(hazard["costs"], lane["costs"])] == pytest.approx(result["costs"])
+    assert (hazard["cost_limit"], lane["cost_limit"]) == (2.0, 10.0)
+    both = [h <= 2.0 and la <= 10.0 for h, la in zip(hazard["costs"], lane["costs"])]
+    assert result["within_all_limits_fraction"] == pytest.approx(sum(both) / 3)
+    text = format_human(result, "x")
+    assert "  lane" in text and "within all" in text
+    langevin = evaluate(policy, 1, seed=5, actions="langevin", progress=False)
+    assert len(langevin["nu"]) == 2 and "nu=" in format_human(langevin, "x")

@@ -5,7 +5,8 @@ against Safety-Gymnasium numbers; omnisafe#127, #311), envs per runner (safety-g
 env counts change what the algorithm sees), cost conventions or observation filters, and the
 bfloat16 kernels some algorithms pick by CPU (lac_rllib/constrained/precision.py) compute
 differently on a CPU without them, the backend a navigation task steps on (batched or stock:
-equal step for step, yet named, so a claim rests on one), and a Point task's robot. Every sweep
+equal step for step, yet named, so a claim rests on one), a Point task's robot, and the constraints
+a run holds apart (docs/constraints.md: each its own cost, not the summed one). Every sweep
 trial records its fingerprint (MLflow tag ``lac.env_fingerprint``, the whole in
 ``lac.env_fingerprint_json``); reports, the frontier, confirmation and the registry of tuned
 configurations never rank runs whose fingerprints differ (sweeps/reports/results.py). Plain data,
@@ -54,6 +55,10 @@ def fingerprint(task: str, params: dict, num_env_runners: int = 0) -> dict[str, 
         # Only where the task has a batched backend (a key elsewhere would change every other id).
         **({"env_backend": params.get("env_backend") or "batched"} if spec.batched else {}),
         **({"robot_variant": params.get("robot_variant") or "safety_gymnasium"} if spec.robot == "Point" else {}),
+        # Only where a run holds constraints apart (``constraints``): their names, in the task's order.
+        # The costs its learner sees are theirs, not the summed cost; their limits are configuration.
+        **({"constraints": [c.name for c in spec.constraints if c.name in params["constraints"]]}
+           if params.get("constraints") else {}),
     }
 
 

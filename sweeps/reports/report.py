@@ -128,6 +128,16 @@ def parent_metrics(summary: pd.DataFrame) -> dict[str, float]:
     return out
 
 
+def constraints_note(trials: pd.DataFrame) -> str:
+    """With several constraints, what the cost columns are (the joint rule, sweeps/score.py); else ''."""
+    names = [c.partition("/")[2] for c in trials.columns if c.startswith("cost_limit/")]
+    if not names:
+        return ""
+    return (f"Several constraints ({', '.join(names)}): a trial's cost is the joint rule's max_k (J_k − b_k), its "
+            "largest excess over a constraint's limit (negative: the tightest one's slack), held to 0; each "
+            "constraint's score is in trials.csv (`episode_cost/NAME`, `cost_limit/NAME`).\n\n")
+
+
 def best_lines(summary: pd.DataFrame) -> list[str]:
     """The best feasible configuration, one line; over a ladder of limits one per limit (a
     configuration is judged at its own limit: returns at different limits do not compare)."""
@@ -550,7 +560,8 @@ def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir, fields: tup
     summary = with_safety(summarize(trials), trials, curves)
     best = best_configuration(summary)
     summary.to_csv(out / "summary.csv", index=False)
-    (out / "summary.md").write_text(markdown_table(summary) + "\n" + safety_markdown(summary, trials, curves)
+    (out / "summary.md").write_text(constraints_note(trials) + markdown_table(summary) + "\n"
+                                    + safety_markdown(summary, trials, curves)
                                     + ("\n" + importance_markdown(trials, fields) if fields else ""), encoding="utf-8")
     (out / "best.json").write_text(json.dumps(best if best else {"best": None}, indent=2) + "\n")
     trials.to_csv(out / "trials.csv", index=False)

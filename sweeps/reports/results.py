@@ -23,6 +23,7 @@ from lac_rllib.constrained.metrics import (
     FEASIBLE,
     LANGEVIN_AT_BOUND,
     LANGEVIN_CLIP_FRACTION,
+    per_constraint,
 )
 from sweeps.objective import OBJECTIVE, WALL_TIME_S, feasible, objective
 from sweeps.score import (
@@ -34,8 +35,10 @@ from sweeps.score import (
     TRAIN,
     TRAIN_COST,
     TRAIN_RETURN,
+    constraint_limits,
     declared,
     eval_score,
+    joint_score,
     train_score,
 )
 from sweeps.tracking import (
@@ -85,7 +88,8 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                                                             WALL_TIME_S)},
                      **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
                                                        *fields) if k in p}})
-        curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")))
+        curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")),
+                                     tuple(constraint_limits(m)))
         # The score the trial was ranked on when it ended (its tag); a run from before the tag: train.
         rows[-1] = scored(rows[-1], curves[tid], m, run.data.tags.get(SCORE_TAG, TRAIN))
     # By trial id, not in the order MLflow lists the runs (the order they ran): a report is a function
@@ -168,9 +172,15 @@ def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> 
     (ret, cost), used = declared(kind, train, evaluated)
     out = {**row, LAST_RETURN: row[EPISODE_RETURN], LAST_COST: row[EPISODE_COST], TRAIN_RETURN: train[0],
            TRAIN_COST: train[1], EVAL_RETURN: evaluated[0], EVAL_COST: evaluated[1], "score": used}
+    limit = row[COST_LIMIT]
+    limits = constraint_limits(metrics or {})
+    if len(limits) > 1:  # several constraints: the joint rule's cost max_k (J_k − b_k) against 0 (sweeps/score.py)
+        (ret, cost), used, per = joint_score(kind, curve, metrics or {}, limits)
+        out.update({"score": used, **{per_constraint(EPISODE_COST, n): c for n, c in per.items()},
+                    **{per_constraint(COST_LIMIT, n): b for n, b in limits.items()}, COST_LIMIT: 0.0})
+        limit = 0.0
     if math.isnan(ret) or math.isnan(cost):
         return out
-    limit = row[COST_LIMIT]
     return {**out, EPISODE_RETURN: ret, EPISODE_COST: cost, FEASIBLE: float(feasible(cost, limit)),
             OBJECTIVE: objective(ret, cost, limit)}
 

@@ -321,3 +321,22 @@ def test_the_plan_says_which_backend_each_task_steps_on(tmp_path, monkeypatch, c
     cli.print_plan(plan)
     assert "env backend: SafetyPointGoal1-v0 batched and stock" in capsys.readouterr().out
     assert cli.env_backends(_plan(tmp_path, monkeypatch, "--space", "ablation", "--name", "a2")) == ""
+
+
+def test_a_sweep_file_sets_a_limit_per_constraint_and_bad_ones_are_refused_before_ray(tmp_path, monkeypatch):
+    """``constraints:`` reaches every trial's ``constraints`` field (each algorithm), ``--set
+    constraints.NAME=b`` changes one limit and keeps the others; a name the task lacks, a negative
+    limit, and constraints with cost_limit or a ladder are refused before Ray, each in one line."""
+    sweep = tmp_path / "two.yaml"
+    sweep.write_text("task: lac/PointTwoCosts-v0\nalgo: [lac, cpo]\nbudget: smoke\nseeds: 1\n"
+                     "constraints: {hazard: 2, lane: 10}\n")
+    plan = _plan(tmp_path, monkeypatch, "--config", str(sweep), "--set", "constraints.lane=7")
+    assert {t.algo for t in plan.trials} == {"lac", "cpo"}
+    assert all(t.params["constraints"] == {"hazard": 2.0, "lane": 7.0} for t in plan.trials)
+    for argv, needle in ((("--set", "constraints.pillars=3"), r"has no constraint 'pillars'; accepted: hazard, lane"),
+                         (("--set", "constraints.lane=-1"), r"--set constraints: Input should be greater than"),
+                         (("--set", "cost_limit=3"), r"constraints with cost_limit: .*accepted: constraints alone"),
+                         (("--cost-limits", "1,2"), r"constraints with cost_limits")):
+        with pytest.raises(ValueError, match=needle) as err:
+            _plan(tmp_path, monkeypatch, "--config", str(sweep), *argv)
+        assert "\n" not in str(err.value)

@@ -68,3 +68,38 @@ def test_score_eval_without_evaluation_episodes_is_refused_and_no_score_then_mea
         sweep_file.SweepFile.model_validate({"score": "eval", "eval_episodes": 0})
     with pytest.raises(Exception, match="eval.*train"):
         sweep_file.SweepFile.model_validate({"score": "last"})
+
+
+def test_with_several_constraints_a_trial_is_judged_on_the_joint_rule():
+    """hazard ≤ 2 and lane ≤ 10: a trial at hazard 0, lane 11 has a summed cost of 11 under the limits'
+    sum 12, and breaks the lane: infeasible, its cost the joint rule's max_k (J_k − b_k) = 1 against
+    0. Its evaluation block within both (1, 9): feasible under score eval, cost −1."""
+    limits = {"cost_limit/hazard": 2.0, "cost_limit/lane": 10.0}
+    curve = _curve([11.0] * 20)
+    curve["episode_cost/hazard"], curve["episode_cost/lane"] = 0.0, 11.0
+    row = {"episode_return": 9.0, "episode_cost": 11.0, "cost_limit": 12.0, "feasible": 1.0, "objective": 9.0}
+    by_train = scored(row, curve, dict(limits), score.TRAIN)
+    assert (by_train["episode_cost"], by_train["cost_limit"], by_train["feasible"]) == (1.0, 0.0, 0.0)
+    assert (by_train["episode_cost/hazard"], by_train["episode_cost/lane"]) == (0.0, 11.0)
+    assert by_train["objective"] == pytest.approx(-1e6 - 1.0)
+    evaluated = {**limits, score.EVAL_RETURN_KEY: 5.0, score.EVAL_COST_KEY: 10.0,
+                 "eval/generator/cost_mean/hazard": 1.0, "eval/generator/cost_mean/lane": 9.0}
+    by_eval = scored(row, curve, evaluated, score.EVAL)
+    assert (by_eval["episode_cost"], by_eval["feasible"], by_eval["score"]) == (-1.0, 1.0, "eval")
+    assert by_eval["objective"] == 5.0
+    # One constraint's eval cost missing: return and costs both from training, and it says so.
+    partial = scored(row, curve, {k: v for k, v in evaluated.items() if k != "eval/generator/cost_mean/lane"},
+                     score.EVAL)
+    assert (partial["score"], partial["episode_return"], partial["episode_cost"]) == ("train", 1.0, 1.0)
+    # An iteration's row: the same rule.
+    assert score.row_cost({"episode_cost": 11.0, "cost_limit": 12.0, **limits, "episode_cost/hazard": 0.0,
+                           "episode_cost/lane": 11.0}) == (1.0, 0.0)
+    assert score.row_cost({"episode_cost": 11.0, "cost_limit": 12.0}) == (11.0, 12.0)
+
+
+def test_the_summary_says_what_the_cost_is_with_several_constraints():
+    from sweeps.reports.report import constraints_note
+
+    two = pd.DataFrame({"episode_cost": [1.0], "cost_limit/hazard": [2.0], "cost_limit/lane": [10.0]})
+    assert "Several constraints (hazard, lane): a trial's cost is the joint rule's" in constraints_note(two)
+    assert constraints_note(pd.DataFrame({"episode_cost": [1.0], "cost_limit": [25.0]})) == ""

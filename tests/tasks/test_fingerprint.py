@@ -115,3 +115,12 @@ def test_two_smoke_runs_differing_in_envs_per_runner_are_split_in_the_summary(ra
     assert "**Not ranked together**" in note and "envs 1 vs 2" in note, note[:2000]
     summary = Path(client.download_artifacts(parent.info.run_id, "summary/summary.csv", str(tmp_path))).read_text()
     assert summary.count("@env:") == 2
+
+
+def test_constraints_held_apart_are_in_the_fingerprint_and_their_limits_are_not():
+    base = fpm.fingerprint("SafetyPointGoal2-v0", {})
+    two = fpm.fingerprint("SafetyPointGoal2-v0", {"constraints": {"vases": 5, "hazards": 10}})
+    other_limits = fpm.fingerprint("SafetyPointGoal2-v0", {"constraints": {"vases": 1, "hazards": 30}})
+    assert "constraints" not in base and two["constraints"] == ["hazards", "vases"]
+    assert fpm.fingerprint_id(two) == fpm.fingerprint_id(other_limits) != fpm.fingerprint_id(base)
+    assert "constraints None vs ['hazards', 'vases']" in fpm.differences(base, two)
