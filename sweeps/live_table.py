@@ -3,8 +3,10 @@
 A Tune ``ProgressReporter`` (Tune calls ``should_report``/``report``). Tune's default output
 names a trial by its config, which for a grid of nested dicts prints as ``...iteration': None}``;
 here a trial is its label (algorithm, group, swept value, seed: ``TrialSpec.label``), and the table holds
-what a safe-RL user watches: status, iteration, env steps, return, cost, feasible, ν. The last
-line counts trials done / total and estimates the time left from the finished trials.
+what a safe-RL user watches: status, iteration, env steps, return, cost, feasible, ν. With several
+constraints the cost is the worst one's (the largest excess over its limit: ``lane 11.0/10``) and
+feasible the joint rule. The last line counts trials done / total and estimates the time left from
+the finished trials.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import time
 from ray.tune import ProgressReporter
 from ray.tune.result import TIME_TOTAL_S, TRAINING_ITERATION
 
-from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
+from lac_rllib.constrained.metrics import COST_LIMIT, ENV_STEPS, EPISODE_COST, EPISODE_RETURN, FEASIBLE, NU
 
 COLUMNS = ("trial", "status", "iter", "env steps", "return", "cost", "feasible", "ν")
 _DONE = ("TERMINATED", "ERROR")
@@ -36,11 +38,23 @@ def format_table(rows: list[list[str]]) -> str:
     return "\n".join([line(COLUMNS), *(line(r) for r in rows)])
 
 
+def cost_cell(r: dict) -> str:
+    """The cost column: the episode cost, or with several constraints the worst one's, ``NAME cost/limit``."""
+    prefix = f"{COST_LIMIT}/"
+    limits = {k[len(prefix):]: v for k, v in r.items() if k.startswith(prefix)}
+    costs = {n: r.get(f"{EPISODE_COST}/{n}") for n in limits}
+    known = {n: c for n, c in costs.items() if c is not None and c == c}
+    if len(limits) < 2 or not known:
+        return _cell(r.get(EPISODE_COST), ".1f")
+    worst = max(known, key=lambda n: known[n] - limits[n])
+    return f"{worst} {known[worst]:.1f}/{limits[worst]:g}"
+
+
 def trial_row(trial) -> list[str]:
     r = trial.last_result or {}
     feasible = r.get(FEASIBLE)
     return [str(trial), trial.status, _cell(r.get(TRAINING_ITERATION), "d"), _cell(r.get(ENV_STEPS), ",.0f"),
-            _cell(r.get(EPISODE_RETURN), ".2f"), _cell(r.get(EPISODE_COST), ".1f"),
+            _cell(r.get(EPISODE_RETURN), ".2f"), cost_cell(r),
             "–" if feasible is None or feasible != feasible else ("yes" if feasible else "no"),
             _cell(r.get(NU), ".3f")]
 

@@ -153,3 +153,18 @@ def row_cost(row: dict) -> tuple[float, float]:
     if len(limits) < 2:
         return row[EPISODE_COST], row[COST_LIMIT]
     return joint_cost({n: row.get(per_constraint(EPISODE_COST, n), math.nan) for n in limits}, limits), 0.0
+
+
+def joint_curve(curve: pd.DataFrame | None, limits: dict[str, float], along: str | None = None
+                ) -> pd.DataFrame | None:
+    """A learning curve with several constraints judged as the verdicts judge it: its episode cost the
+    joint rule's max_k (J_k − b_k) per iteration and its limit 0 (the summed cost kept as
+    ``summed_cost``), so every figure read from a curve (violation, steps to feasible, the multiplier's
+    behaviour) reads the joint rule; on a rung of a ladder ``along`` constraint k both shifted by b_k.
+    A curve without the constraints' columns is returned as it is."""
+    if curve is None or len(limits) < 2 or any(per_constraint(EPISODE_COST, n) not in curve for n in limits):
+        return curve
+    excess = pd.concat([pd.to_numeric(curve[per_constraint(EPISODE_COST, n)], errors="coerce") - b
+                        for n, b in limits.items()], axis=1).max(axis=1, skipna=False)
+    shift = limits.get(along or "", 0.0)
+    return curve.assign(summed_cost=curve[EPISODE_COST], **{EPISODE_COST: excess + shift, COST_LIMIT: shift})

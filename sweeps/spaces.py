@@ -236,8 +236,9 @@ def count_trials(sweep, task_ids: list[str]) -> int:
 def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
     """A grid sweep's trials, in order: task, group, configuration (grid combinations, the file's
     order), algorithm (where ``algo`` is a list), cost limit (where ``cost_limits`` is a ladder:
-    its ``cost_limit``), seed; then the task's fixed-multiplier frontier (``frontier``: group
-    ``frontier``, one configuration per fixed ν, at the task's limit: ν does not follow it). A
+    its ``cost_limit``, or along ``ladder_constraint`` that constraint's limit), seed; then the task's
+    fixed-multiplier frontier (``frontier``: group ``frontier``, one configuration per fixed ν, at the
+    task's limit: ν does not follow it). A
     configuration's ``overrides`` are its group's ``set`` under its grid values; ``param``/``value``
     name what its grid point sweeps."""
     import itertools
@@ -260,6 +261,10 @@ def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
                                  **({"algo": algo} if algo else {})}
                     for limit in sweep.cost_limits or (None,):
                         own = overrides if limit is None else {**overrides, COST_LIMIT_FIELD: float(limit)}
+                        if limit is not None and sweep.ladder_constraint:  # a rung along one constraint
+                            rung = {**{k: float(v) for k, v in sweep.constraints.items()},
+                                    sweep.ladder_constraint: float(limit)}
+                            own = {**overrides, "constraints": rung}
                         trials += [TrialSpec(name, param, value, task, seed, own, limit=limit)
                                    for seed in sweep.seed_list()]
         if sweep.frontier:

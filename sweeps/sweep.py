@@ -113,6 +113,7 @@ def param_space(plan: Plan, parent_run_id: str) -> dict:
         "timesteps": plan.timesteps, "cpus": plan.sweep.cpus_per_trial, "user_tasks": plan.user_tasks,
         "eval_episodes": EVAL_EPISODES if plan.sweep.eval_episodes is None else plan.sweep.eval_episodes,
         "score": plan.sweep.score or SCORES[0],
+        "ladder_constraint": plan.sweep.ladder_constraint,  # several constraints: the one a ladder runs along
         "eval_modes": plan.sweep.eval_modes, "eval_every": plan.sweep.eval_every,
         "user_algos": plan.user_algos, spaces.LABELS_KEY: spaces.LABELS,  # how its trials are labelled
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},

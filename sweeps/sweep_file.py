@@ -488,6 +488,10 @@ class SweepFile(BaseModel):
     docs/tasks.md, a user env's its ``constraints``): every trial holds each constraint under its own
     limit with its own multiplier (docs/constraints.md); ``--set constraints.NAME=b`` on the command
     line. Without it, one limit on the summed cost (``cost_limit``, the task's by default)."""
+    ladder_constraint: Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,60}$")] | None = None
+    """With ``constraints`` and ``cost_limits``: the constraint the ladder runs along, each rung of
+    ``cost_limits`` its limit, the other constraints at their ``constraints`` limits; the report ranks
+    the configurations at each rung on the joint rule (docs/constraints.md)."""
     tune: TuneSpec | None = None
     """A tuned comparison (sweeps/tuned.py): every algorithm the sweep runs is searched over its own
     search space with the same searcher, samples, seeds and env steps, its best configuration and its
@@ -566,12 +570,17 @@ class SweepFile(BaseModel):
             raise KeyedError((key,), f"{key} with a search: a ladder and a frontier run grid configurations; "
                              "accepted: with grid or groups (or none: one configuration)")
         if self.constraints is not None:
+            ladder = self.cost_limits is not None and self.ladder_constraint is None
             for key, clash in (("cost_limit", "cost_limit" in self.set), ("constraints", "constraints" in self.set),
-                               ("cost_limits", self.cost_limits is not None), ("frontier", self.frontier is not None)):
+                               ("cost_limits", ladder), ("frontier", self.frontier is not None)):
                 if clash:
                     raise KeyedError(("constraints",), f"constraints with {key}: constraints give each constraint its "
-                                     "limit; accepted: constraints alone (one limit on the summed cost: cost_limit; a "
-                                     "ladder or a frontier runs on one constraint for now)")
+                                     "limit; accepted: constraints alone, or with cost_limits and ladder_constraint "
+                                     "(a ladder along one constraint); one limit on the summed cost: cost_limit")
+        if self.ladder_constraint is not None and (self.constraints is None or self.cost_limits is None):
+            raise KeyedError(("ladder_constraint",), f"ladder_constraint {self.ladder_constraint} without "
+                             f"{'constraints' if self.constraints is None else 'cost_limits'}; accepted: with "
+                             "constraints (the other constraints' limits) and cost_limits (its rungs)")
         if self.cost_limits is not None and "cost_limit" in self.set:
             raise KeyedError(("set", "cost_limit"), "cost_limit set beside cost_limits; accepted: one of them "
                              "(a ladder of one limit: cost_limits: [b])")

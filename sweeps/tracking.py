@@ -29,6 +29,7 @@ SWEEP_TAG, TRIAL_TAG, NODE_TAG = "lac.sweep", "lac.trial_id", "lac.node_id"
 #: Tags "lac.resolved.<field>": what a rule-valued field ("auto") ran as on the trial's latest node.
 RESOLVED_TAG_PREFIX = "lac.resolved."
 CHECKPOINT_TAG = "lac.checkpoint_artifact_path"
+LADDER_CONSTRAINT_TAG = "lac.ladder_constraint"  # a rung of a ladder along one of several constraints
 ERROR_TAG = "lac.error"  # the last error of a failed attempt (cleared when a retry starts)
 STATUS_TAG = "lac.sweep_status"  # on the parent run: finished | interrupted
 STOPPED_TAG = "lac.stopped_early"  # on a child run the scheduler (ASHA) stopped before its budget

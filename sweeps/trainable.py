@@ -43,6 +43,7 @@ from sweeps.score import (
     TRAIN_RETURN,
     declared,
     eval_score,
+    joint_curve,
     joint_score,
     row_cost,
     train_score,
@@ -57,6 +58,7 @@ from sweeps.tracking import (
     ENV_FINGERPRINT_JSON_TAG,
     ENV_FINGERPRINT_TAG,
     ERROR_TAG,
+    LADDER_CONSTRAINT_TAG,
     NODE_TAG,
     P_ALGO,
     P_GROUP,
@@ -205,7 +207,7 @@ class SweepTrial(tune.Trainable):
         """Final checkpoint, evaluation block and learning curve as artifacts, the trial's declared
         score (sweeps/score.py: the sweep's ``score``) and its train score logged, the score used
         tagged, then the MLflow run closed; returns the declared score."""
-        from sweeps.reports.multiplier import METRIC_PREFIX, multiplier_behaviour
+        from sweeps.reports.multiplier import METRIC_PREFIX, constraint_behaviour, multiplier_behaviour
         from sweeps.reports.report import trial_curve
 
         with tempfile.TemporaryDirectory() as tmp:
@@ -222,7 +224,10 @@ class SweepTrial(tune.Trainable):
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)
             self.tracker.client.log_artifact(self.tracker.run_id, os.path.join(tmp, "learning_curve.png"))
         train = train_score(curve)
-        behaviour = {METRIC_PREFIX + k: v for k, v in multiplier_behaviour(curve).items() if math.isfinite(v)}
+        figures = multiplier_behaviour(joint_curve(curve, dict(zip(names, several.limits))) if names else curve)
+        if names:  # several constraints: each one's multiplier against its own cost and limit too
+            figures |= constraint_behaviour(curve, dict(zip(names, several.limits)))
+        behaviour = {METRIC_PREFIX + k: v for k, v in figures.items() if math.isfinite(v)}
         try:  # the evaluation's metrics, logged above straight to the store
             metrics = self.tracker.client.get_run(self.tracker.run_id).data.metrics
         except Exception:  # the store away: ranked on train, and the tag says so
@@ -241,7 +246,9 @@ class SweepTrial(tune.Trainable):
                                     **behaviour}.items() if math.isfinite(v)}
         if logged:
             self.tracker.log_metrics(logged, step=int(curve[ENV_STEPS].max()))
-        self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint", SCORE_TAG: used})
+        self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint", SCORE_TAG: used,
+                               **({LADDER_CONSTRAINT_TAG: self.config["ladder_constraint"]}
+                                  if names and self.config.get("ladder_constraint") else {})})
         self.tracker.finish("FINISHED")
         return score
 

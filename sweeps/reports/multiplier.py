@@ -68,6 +68,22 @@ def multiplier_behaviour(curve: pd.DataFrame) -> dict[str, float]:
     return out
 
 
+def constraint_behaviour(curve: pd.DataFrame, limits: dict[str, float]) -> dict[str, float]:
+    """With several constraints, :func:`multiplier_behaviour` of each constraint's own multiplier and
+    cost against its limit (``nu/NAME``, ``episode_cost/NAME`` in the curve): ``FIGURE/NAME`` →
+    value."""
+    out = {}
+    for name, b in limits.items():
+        cost, nu = f"{EPISODE_COST}/{name}", f"{NU}/{name}"
+        if cost not in curve:
+            continue
+        # the summed cost's rate and the largest ν's bound are not this constraint's: left out (NaN)
+        own = curve.drop(columns=[c for c in (EPISODE_COST, NU, NU_MAX, COST_LIMIT, COST_RATE) if c in curve])
+        own = own.rename(columns={cost: EPISODE_COST, nu: NU}).assign(**{COST_LIMIT: b})
+        out.update({f"{k}/{name}": v for k, v in multiplier_behaviour(own).items()})
+    return out
+
+
 def behaviour_table(trials: pd.DataFrame, curves: dict, keys: list[str]) -> pd.DataFrame:
     """Per configuration (``keys``, the limit among them on a ladder), the mean over its seeds of each
     trial's figures (``curves``: trial id → curve), with how many seeds had a curve."""

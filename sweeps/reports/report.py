@@ -133,9 +133,12 @@ def constraints_note(trials: pd.DataFrame) -> str:
     names = [c.partition("/")[2] for c in trials.columns if c.startswith("cost_limit/")]
     if not names:
         return ""
+    along = sorted({str(v) for v in trials.get("ladder_constraint", pd.Series(dtype=str)).dropna() if v})
+    ladder = (f" On the ladder along {', '.join(along)} both are shifted by the rung's limit b: the cost is "
+              "b + that excess, held to b." if along else "")
     return (f"Several constraints ({', '.join(names)}): a trial's cost is the joint rule's max_k (J_k − b_k), its "
             "largest excess over a constraint's limit (negative: the tightest one's slack), held to 0; each "
-            "constraint's score is in trials.csv (`episode_cost/NAME`, `cost_limit/NAME`).\n\n")
+            f"constraint's score is in trials.csv (`episode_cost/NAME`, `cost_limit/NAME`).{ladder}\n\n")
 
 
 def best_lines(summary: pd.DataFrame) -> list[str]:
@@ -552,6 +555,7 @@ def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir, fields: tup
     """Write summary.csv/.md (with the safety statistics), best.json, trials.csv, the plots, the
     reward-cost frontier (PNG and interactive HTML) and, where the sweep varies ``fields``, which of
     them matter (importance.png/.html); return {file name: path}."""
+    from sweeps.reports.constraints import constraints_markdown, constraints_table
     from sweeps.reports.frontier import frontier_html, frontier_png
     from sweeps.reports.importance import importance_plots
 
@@ -560,12 +564,17 @@ def write_sweep_reports(trials: pd.DataFrame, curves: dict, out_dir, fields: tup
     summary = with_safety(summarize(trials), trials, curves)
     best = best_configuration(summary)
     summary.to_csv(out / "summary.csv", index=False)
+    per_constraint = constraints_markdown(trials)
     (out / "summary.md").write_text(constraints_note(trials) + markdown_table(summary) + "\n"
+                                    + (per_constraint + "\n" if per_constraint else "")
                                     + safety_markdown(summary, trials, curves)
                                     + ("\n" + importance_markdown(trials, fields) if fields else ""), encoding="utf-8")
     (out / "best.json").write_text(json.dumps(best if best else {"best": None}, indent=2) + "\n")
     trials.to_csv(out / "trials.csv", index=False)
     paths = {n: str(out / n) for n in ("summary.csv", "summary.md", "best.json", "trials.csv")}
+    if not (per := constraints_table(trials)).empty:  # several constraints: the table per constraint
+        per.to_csv(out / "constraints.csv", index=False)
+        paths["constraints.csv"] = str(out / "constraints.csv")
     for name, made in (("cost_boxplots.png", cost_box_plots(trials, out / "cost_boxplots.png")),
                        ("aggregates.png", aggregate_plots(summary, out / "aggregates.png")),
                        ("learning_curves.png", learning_curves(trials, curves, out / "learning_curves.png")),

@@ -38,6 +38,7 @@ from sweeps.score import (
     constraint_limits,
     declared,
     eval_score,
+    joint_curve,
     joint_score,
     train_score,
 )
@@ -47,6 +48,7 @@ from sweeps.tracking import (
     DEFAULT_TAG,
     ENV_FINGERPRINT_JSON_TAG,
     ENV_FINGERPRINT_TAG,
+    LADDER_CONSTRAINT_TAG,
     P_ALGO,
     P_GROUP,
     P_SEED,
@@ -88,10 +90,14 @@ def sweep_results(tracker: SweepTracker, parent: str, fields: tuple[str, ...] = 
                                                             WALL_TIME_S)},
                      **{k: param_value(p[k]) for k in ("langevin_steps", "langevin_step_size", "temperature", "beta",
                                                        *fields) if k in p}})
+        limits = constraint_limits(m)
+        rows[-1]["ladder_constraint"] = run.data.tags.get(LADDER_CONSTRAINT_TAG, "")
         curves[tid] = learning_curve(tracker.client, run.info.run_id, m.get(COST_LIMIT, float("nan")),
-                                     tuple(constraint_limits(m)))
+                                     tuple(limits))
         # The score the trial was ranked on when it ended (its tag); a run from before the tag: train.
         rows[-1] = scored(rows[-1], curves[tid], m, run.data.tags.get(SCORE_TAG, TRAIN))
+        # Several constraints: the curve judged on the joint rule, as the trial is (sweeps/score.py).
+        curves[tid] = joint_curve(curves[tid], limits, along=rows[-1].get("ladder_constraint") or None)
     # By trial id, not in the order MLflow lists the runs (the order they ran): a report is a function
     # of what was recorded, the same for any finish order.
     rows.sort(key=lambda r: str(r["trial_id"]))
@@ -176,9 +182,12 @@ def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> 
     limits = constraint_limits(metrics or {})
     if len(limits) > 1:  # several constraints: the joint rule's cost max_k (J_k − b_k) against 0 (sweeps/score.py)
         (ret, cost), used, per = joint_score(kind, curve, metrics or {}, limits)
+        # A rung of a ladder along constraint k: the same rule shifted by its limit b_k (cost b_k + the
+        # excess against b_k), so the ladder's report ranks at each rung as at any limit.
+        limit = limits.get(row.get("ladder_constraint") or "", 0.0)
+        cost = cost + limit
         out.update({"score": used, **{per_constraint(EPISODE_COST, n): c for n, c in per.items()},
-                    **{per_constraint(COST_LIMIT, n): b for n, b in limits.items()}, COST_LIMIT: 0.0})
-        limit = 0.0
+                    **{per_constraint(COST_LIMIT, n): b for n, b in limits.items()}, COST_LIMIT: limit})
     if math.isnan(ret) or math.isnan(cost):
         return out
     return {**out, EPISODE_RETURN: ret, EPISODE_COST: cost, FEASIBLE: float(feasible(cost, limit)),

@@ -42,3 +42,14 @@ def test_rows_say_what_each_trial_is_running_first_and_cut_when_long():
                                 "3.0", "no", "0.250"]
     assert lines[4] == "… 1 more trials not shown" and lines[5].startswith("progress: 2/4 trials done")
     assert len(LiveTable(4, 2, max_rows=3).render(trials, done=True).splitlines()) == 6  # all rows at the end
+
+
+def test_with_several_constraints_the_cost_column_shows_the_worst_one():
+    from sweeps.live_table import cost_cell, trial_row
+
+    r = {**_result(3, 1500, 1.0, 13.0, 0, 0.4, 30), "cost_limit": 12.0, "cost_limit/hazard": 2.0,
+         "cost_limit/lane": 10.0, "episode_cost/hazard": 2.5, "episode_cost/lane": 10.5}
+    assert cost_cell(r) == "hazard 2.5/2"  # excess 0.5 each: the first of the task's order wins a tie
+    r["episode_cost/lane"] = 11.0
+    assert trial_row(FakeTrial("t", "RUNNING", r))[5] == "lane 11.0/10"
+    assert cost_cell(_result(3, 1500, 1.0, 13.0, 0, 0.4, 30)) == "13.0"

@@ -340,3 +340,18 @@ def test_a_sweep_file_sets_a_limit_per_constraint_and_bad_ones_are_refused_befor
         with pytest.raises(ValueError, match=needle) as err:
             _plan(tmp_path, monkeypatch, "--config", str(sweep), *argv)
         assert "\n" not in str(err.value)
+
+
+def test_a_ladder_along_one_constraint_keeps_the_others_at_their_limits(tmp_path, monkeypatch):
+    sweep = tmp_path / "ladder.yaml"
+    sweep.write_text("task: lac/PointTwoCosts-v0\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\n"
+                     "constraints: {hazard: 2, lane: 10}\ncost_limits: [5, 20]\nladder_constraint: lane\n")
+    plan = _plan(tmp_path, monkeypatch, "--config", str(sweep))
+    assert [(t.limit, t.params["constraints"]) for t in plan.trials] == [
+        (5.0, {"hazard": 2.0, "lane": 5.0}), (20.0, {"hazard": 2.0, "lane": 20.0})]
+    assert all(t.params["cost_limit"] is None for t in plan.trials)
+    bare = tmp_path / "bare.yaml"
+    bare.write_text("task: lac/PointTwoCosts-v0\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\ncost_limits: [5, 20]\n"
+                    "ladder_constraint: lane\n")
+    with pytest.raises(ValueError, match=r"ladder_constraint lane without constraints; accepted: with constraints"):
+        _plan(tmp_path, monkeypatch, "--config", str(bare))

@@ -103,3 +103,41 @@ def test_the_summary_says_what_the_cost_is_with_several_constraints():
     two = pd.DataFrame({"episode_cost": [1.0], "cost_limit/hazard": [2.0], "cost_limit/lane": [10.0]})
     assert "Several constraints (hazard, lane): a trial's cost is the joint rule's" in constraints_note(two)
     assert constraints_note(pd.DataFrame({"episode_cost": [1.0], "cost_limit": [25.0]})) == ""
+
+
+def test_a_curve_with_several_constraints_is_judged_on_the_joint_rule():
+    from sweeps.reports.multiplier import constraint_behaviour
+    from sweeps.reports.safety import violation
+
+    curve = _curve([5.0, 5.0, 5.0])
+    curve["episode_cost/hazard"], curve["episode_cost/lane"] = [3.0, 1.0, 1.0], [2.0, 12.0, 9.0]
+    curve["nu/hazard"], curve["nu/lane"] = [0.1, 0.0, 0.0], [0.0, 0.2, 0.3]
+    limits = {"hazard": 2.0, "lane": 10.0}
+    joint = score.joint_curve(curve, limits)
+    assert joint["episode_cost"].tolist() == [1.0, 2.0, -1.0] and (joint["cost_limit"] == 0.0).all()
+    assert joint["summed_cost"].tolist() == [5.0, 5.0, 5.0]
+    assert violation(joint)["steps_to_feasible"] == 3000  # summed 5 ≤ 25 would say 1000
+    assert score.joint_curve(curve, {"hazard": 2.0}) is curve  # one constraint: as it is
+    figures = constraint_behaviour(curve, limits)
+    assert figures["steps_to_feasible/hazard"] == 2000 and figures["steps_to_feasible/lane"] == 1000
+    assert figures["nu_at_zero/hazard"] == pytest.approx(2 / 3)
+
+
+def test_a_rung_of_a_ladder_along_one_constraint_is_the_joint_rule_shifted_to_its_limit():
+    limits = {"cost_limit/hazard": 2.0, "cost_limit/lane": 10.0}
+    curve = _curve([11.0] * 20)
+    curve["episode_cost/hazard"], curve["episode_cost/lane"] = 1.0, 11.0
+    row = {"episode_return": 9.0, "episode_cost": 11.0, "cost_limit": 12.0, "feasible": 1.0, "objective": 9.0,
+           "ladder_constraint": "lane"}
+    out = scored(row, curve, dict(limits), score.TRAIN)
+    assert (out["episode_cost"], out["cost_limit"], out["feasible"]) == (11.0, 10.0, 0.0)  # 10 + excess 1
+    assert out["objective"] == pytest.approx(-1e6 - 1.0)  # the same as on the unshifted rule
+    shifted = score.joint_curve(curve, {"hazard": 2.0, "lane": 10.0}, along="lane")
+    assert (shifted["episode_cost"] == 11.0).all() and (shifted["cost_limit"] == 10.0).all()
+
+
+def test_the_summary_says_a_ladder_along_a_constraint_is_shifted():
+    from sweeps.reports.report import constraints_note
+
+    two = pd.DataFrame({"cost_limit/hazard": [2.0], "cost_limit/lane": [10.0], "ladder_constraint": ["lane"]})
+    assert "On the ladder along lane both are shifted by the rung's limit b" in constraints_note(two)
