@@ -20,6 +20,12 @@ report says where two rungs still share one frontier point (sweeps/reports/ladde
 
     lac-sweep calibrate --task lac/PointHazard-v0 [--algo ppo_lag] [--timesteps 20000]
     lac-sweep calibrate --config my_sweep.yaml          # its tasks, a user's env included
+    lac-sweep calibrate --task SafetyPointGoal2-v0 --constraint vases   # one of several constraints
+
+With ``--constraint NAME`` both runs' costs are that constraint's (docs/constraints.md): the
+unconstrained run holds every constraint of the task apart with every ν at 0, and the snippet is a
+ladder along that constraint (``ladder_constraint``; the sweep file's ``constraints`` gives the
+others' limits).
 
 Every check runs before Ray starts; a user's env is announced before it is built.
 """
@@ -52,6 +58,7 @@ class Calibration:
     random_returns: list[float] = dataclasses.field(default_factory=list)  # each random episode's return
     free_returns: list[float] = dataclasses.field(default_factory=list)  # the unconstrained run's, its tail
     frontier: list[float] = dataclasses.field(default_factory=list)  # the proposed fixed ν values
+    constraint: str | None = None  # the one constraint of several whose costs these are
 
     @property
     def random_cost(self) -> float:
@@ -87,9 +94,12 @@ def propose_frontier(gain: float, cost: float, points: int = 6) -> list[float]:
     return sorted({0.0, *(round2(scale * 2.0 ** k) for k in np.linspace(-4, 1, points))})
 
 
-def random_episode_costs(spec, episodes: int, seed: int) -> tuple[list[float], bool, list[float]]:
+def random_episode_costs(spec, episodes: int, seed: int, constraint: str | None = None
+                         ) -> tuple[list[float], bool, list[float]]:
     """Each of ``episodes`` random-action episodes' cost, in the task's convention (seeded: episode
-    i is reset with seed + i), whether any of them cost 0, and each episode's return."""
+    i is reset with seed + i), whether any of them cost 0, and each episode's return; the cost is
+    ``constraint``'s where one is named."""
+    own = next(c for c in spec.constraints if c.name == constraint) if constraint else None
     env = spec.make()
     env.action_space.seed(seed)
     costs, returns = [], []
@@ -99,7 +109,7 @@ def random_episode_costs(spec, episodes: int, seed: int) -> tuple[list[float], b
             total, ret, discount, done = 0.0, 0.0, 1.0, False
             while not done:
                 _, reward, terminated, truncated, info = env.step(env.action_space.sample())
-                total += discount * float(info.get("cost", 0.0))
+                total += discount * (own.step_cost(info) if own else float(info.get("cost", 0.0)))
                 ret += float(reward)
                 discount *= spec.episode_cost_discount
                 done = terminated or truncated
@@ -110,17 +120,23 @@ def random_episode_costs(spec, episodes: int, seed: int) -> tuple[list[float], b
     return costs, any(c == 0 for c in costs), returns
 
 
-def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tuple[list[float], bool, list[float]]:
+def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int, constraint: str | None = None
+                        ) -> tuple[list[float], bool, list[float]]:
     """The mean episode cost of each of the last TAIL of iterations of ``algo`` on ``task`` with ν
     pinned at 0 (``nu_fixed``) at its quick sizes, whether an iteration's mean cost was 0, and those
-    iterations' mean episode returns."""
+    iterations' mean episode returns; ``constraint``'s cost where one is named (every constraint of
+    the task then held apart, each ν at 0)."""
     import ray
 
     from lac_rllib.algorithms import registry
-    from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, iteration_row
+    from lac_rllib.constrained.metrics import ENV_STEPS, EPISODE_COST, EPISODE_RETURN, iteration_row, per_constraint
     from lac_rllib.tasks import get_task
 
     sets = {**registry.budget_fields(algo, "quick", get_task(task).preset), "nu_fixed": 0.0}
+    names = [c.name for c in get_task(task).constraints]
+    if constraint:  # every constraint apart (their limits change nothing with ν at 0): each one's cost
+        sets["constraints"] = dict.fromkeys(names, 0.0)
+    key = per_constraint(EPISODE_COST, constraint) if constraint and len(names) > 1 else EPISODE_COST
     config = registry.build_config(algo, task, seed, sets, timesteps=timesteps)
     # One process: the env runner samples in the driver, where a user's env module is importable
     # (its folder travels in the task's kwargs: lac_rllib/tasks/user.py). A caller's Ray is used as it is.
@@ -138,32 +154,36 @@ def unconstrained_costs(algo: str, task: str, timesteps: int, seed: int) -> tupl
     finally:
         if started:
             ray.shutdown()
-    rows = [r for r in rows if math.isfinite(r[EPISODE_COST])]
+    rows = [r for r in rows if math.isfinite(r.get(key, math.nan))]
     tail = rows[-max(1, math.ceil(TAIL * len(rows))):]
-    costs = [r[EPISODE_COST] for r in tail]
+    costs = [r[key] for r in tail]
     return costs, any(c == 0 for c in costs), [r[EPISODE_RETURN] for r in tail if math.isfinite(r[EPISODE_RETURN])]
 
 
-def calibrate(task: str, algo: str, timesteps: int, episodes: int, limits: int, seed: int) -> Calibration:
-    """Both runs on ``task`` and the ladder between them (the module docstring)."""
+def calibrate(task: str, algo: str, timesteps: int, episodes: int, limits: int, seed: int,
+              constraint: str | None = None) -> Calibration:
+    """Both runs on ``task`` and the ladder between them (the module docstring), on ``constraint``'s
+    cost where one is named."""
     from lac_rllib.tasks import get_task
 
     spec = get_task(task)
-    rand, rand_zero, rand_ret = random_episode_costs(spec, episodes, seed)
-    free, free_zero, free_ret = unconstrained_costs(algo, task, timesteps, seed)
+    rand, rand_zero, rand_ret = random_episode_costs(spec, episodes, seed, constraint)
+    free, free_zero, free_ret = unconstrained_costs(algo, task, timesteps, seed, constraint)
     zero = rand_zero or free_zero
     ladder = propose_ladder(float(np.mean(rand)), float(np.mean(free)), limits, zero)
     gain = float(np.mean(free_ret)) - float(np.mean(rand_ret)) if free_ret and rand_ret else math.nan
     return Calibration(task, algo, rand, free, zero, ladder, rand_ret, free_ret,
-                       propose_frontier(gain, float(np.mean(free))))
+                       propose_frontier(gain, float(np.mean(free))), constraint)
 
 
 def snippet(c: Calibration, timesteps: int) -> str:
     """The sweep-file snippet of a calibration: its ladder and, as comments, where it came from."""
+    along = (f"# along {c.constraint}: its cost alone; constraints: {{...}} gives the others' limits\n"
+             f"ladder_constraint: {c.constraint}\n" if c.constraint else "")
     return (f"# lac-sweep calibrate: {c.task}, a random policy's episodes cost {c.random_cost:.3g} on average, "
             f"{c.algo} with nu pinned at 0 ({timesteps:,} env steps) {c.free_cost:.3g}"
             f"{'; an episode cost 0, so the ladder starts at 0' if c.zero_seen else ''}\n"
-            f"cost_limits: [{', '.join(f'{b:g}' for b in c.ladder)}]\n"
+            f"{along}cost_limits: [{', '.join(f'{b:g}' for b in c.ladder)}]\n"
             + (f"# the frontier: nu* = (return {np.mean(c.free_returns):.3g} - random {np.mean(c.random_returns):.3g})"
                f" / cost {c.free_cost:.3g}; 0 and nu*/16 .. 2 nu*\n"
                f"frontier: {{algo: {c.algo}, nu: [{', '.join(f'{v:g}' for v in c.frontier)}]}}\n"
@@ -182,6 +202,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=20, help="the random policy's episodes (default 20)")
     p.add_argument("--limits", type=int, default=4, help="limits in the ladder, 0 included where proposed (default 4)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--constraint", default=None, metavar="NAME",
+                   help="one of the task's constraints (docs/constraints.md): calibrate a ladder along its cost alone")
     p.add_argument("--out", default=None, metavar="FILE.yaml",
                    help="where the snippet goes (default: calibrate-TASK.yaml here, one per task)")
     return p
@@ -198,6 +220,17 @@ def check(args, algo: str) -> None:
     if not registry.has_multiplier(algo):
         raise ValueError(f"--algo {algo} has no Lagrange multiplier to pin at 0; accepted: "
                          f"{registry.with_multiplier_text()}")
+
+
+def check_constraint(name: str | None, ids: list[str]) -> None:
+    """``--constraint``: one every task declares (each task's accepted ones named where it lacks it)."""
+    from lac_rllib.tasks import get_task
+
+    for task in ids if name else ():
+        names = [c.name for c in get_task(task).constraints]
+        if name not in names:
+            raise ValueError(f"--constraint {name}: {task} has no constraint {name!r}; accepted: "
+                             f"{', '.join(names) or 'none: it declares no constraints'}")
 
 
 def tasks_of(args) -> tuple[list[str], str | None]:
@@ -227,10 +260,11 @@ def main(argv: list[str] | None = None) -> int:
         ids, first = tasks_of(args)
         algo = args.algo or first or registry.DEFAULT_ALGO
         check(args, algo)
+        check_constraint(args.constraint, ids)
     except (ValueError, OSError) as e:  # a SweepFileError is a ValueError
         p.exit(2, f"{PROG}: error: {e}\n")
     for task in ids:
-        c = calibrate(task, algo, args.timesteps, args.episodes, args.limits, args.seed)
+        c = calibrate(task, algo, args.timesteps, args.episodes, args.limits, args.seed, args.constraint)
         text = snippet(c, args.timesteps)
         out = Path(args.out or f"calibrate-{task.replace('/', '_')}.yaml")
         if args.out and len(ids) > 1:

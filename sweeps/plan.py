@@ -214,7 +214,9 @@ def with_tuned(trials: list[TrialSpec], sweep: SweepFile, sets: dict, registry: 
                 tuned = {k: v for k, v in config.items() if k not in t.overrides and k not in sets}
                 return fingerprint(t.task, spaces.trial_params(t.task, sweep.budget, sets, {**tuned, **t.overrides}))
 
-            path, entry = tuned_entry(registry, t.task, algo, sweep.budget, float(limit), environment,
+            # a limit per constraint (constraints): an entry tuned at those limits
+            wanted = own["constraints"] if own.get("constraints") else float(limit)
+            path, entry = tuned_entry(registry, t.task, algo, sweep.budget, wanted, environment,
                                       dataclasses.replace(t, params=own).config_label(), sweep.tuned_limit)
             cache[key] = {k: v for k, v in applied(entry).items() if k not in t.overrides and k not in sets}
             if entry.verdict == DEFAULT_STANDS and path not in said:

@@ -268,8 +268,13 @@ def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
                         trials += [TrialSpec(name, param, value, task, seed, own, limit=limit)
                                    for seed in sweep.seed_list()]
         if sweep.frontier:
+            along = {}
+            if sweep.ladder_constraint:  # along one of several constraints: its ν held, the others learn
+                along = {"nu_fixed_constraint": sweep.ladder_constraint,
+                         "constraints": {**{k: float(v) for k, v in sweep.constraints.items()},
+                                         sweep.ladder_constraint: float(max(sweep.cost_limits))}}
             for nu in sweep.frontier.nu:
-                overrides = {"algo": sweep.frontier.algo, FRONTIER_FIELD: float(nu)}
+                overrides = {"algo": sweep.frontier.algo, FRONTIER_FIELD: float(nu), **along}
                 trials += [TrialSpec(FRONTIER_GROUP, FRONTIER_FIELD, float(nu), task, seed, overrides)
                            for seed in sweep.seed_list()]
     return trials

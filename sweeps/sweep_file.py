@@ -491,7 +491,8 @@ class SweepFile(BaseModel):
     ladder_constraint: Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,60}$")] | None = None
     """With ``constraints`` and ``cost_limits``: the constraint the ladder runs along, each rung of
     ``cost_limits`` its limit, the other constraints at their ``constraints`` limits; the report ranks
-    the configurations at each rung on the joint rule (docs/constraints.md)."""
+    the configurations at each rung on the joint rule, and a ``frontier`` holds that constraint's
+    multiplier at each ν while the others learn (docs/constraints.md)."""
     tune: TuneSpec | None = None
     """A tuned comparison (sweeps/tuned.py): every algorithm the sweep runs is searched over its own
     search space with the same searcher, samples, seeds and env steps, its best configuration and its
@@ -570,9 +571,10 @@ class SweepFile(BaseModel):
             raise KeyedError((key,), f"{key} with a search: a ladder and a frontier run grid configurations; "
                              "accepted: with grid or groups (or none: one configuration)")
         if self.constraints is not None:
-            ladder = self.cost_limits is not None and self.ladder_constraint is None
+            ladder = self.ladder_constraint is None
             for key, clash in (("cost_limit", "cost_limit" in self.set), ("constraints", "constraints" in self.set),
-                               ("cost_limits", ladder), ("frontier", self.frontier is not None)):
+                               ("cost_limits", ladder and self.cost_limits is not None),
+                               ("frontier", ladder and self.frontier is not None)):
                 if clash:
                     raise KeyedError(("constraints",), f"constraints with {key}: constraints give each constraint its "
                                      "limit; accepted: constraints alone, or with cost_limits and ladder_constraint "

@@ -120,7 +120,9 @@ class Entry(BaseModel):
     candidate: dict[str, Any] | None = None
     """Where the default stands: the tuned configuration that was confirmed and not shown better."""
     constraints: dict[str, float] | None = None
-    """What it was constrained by: ``{cost: LIMIT}`` (the one summed cost)."""
+    """What it was constrained by: ``{cost: LIMIT}`` (the one summed cost), or each constraint's limit
+    (``{hazards: 10, vases: 5}``, a run with ``constraints``: docs/constraints.md; ``cost_limit`` is
+    then 0, the joint rule's)."""
     searcher: str | None = None
     """The search's sampler."""
     num_samples: int | None = Field(None, ge=1)
@@ -151,13 +153,23 @@ def _num(x: float) -> str:
     return s if float(s) == float(x) else repr(float(x))
 
 
-def entry_key(budget, cost_limit: float, fingerprint_id: str) -> str:
-    """What an entry is kept by: its budget, its limit (the constraints: one summed cost) and its env."""
+def entry_key(budget, cost_limit: float, fingerprint_id: str, constraints: dict | None = None) -> str:
+    """What an entry is kept by: its budget, its limit (one summed cost's) or each constraint's, and its env."""
+    if named_limits(constraints):
+        limits = "-".join(f"{n}{_num(b)}" for n, b in sorted(constraints.items()))
+        return f"{budget}-{limits}-{fingerprint_id}"
     return f"{budget}-b{_num(cost_limit)}-{fingerprint_id}"
 
 
+def named_limits(constraints: dict | None) -> dict[str, float]:
+    """An entry's or a trial's limit per constraint (its ``constraints``), {} for one on the summed cost."""
+    if not constraints or set(constraints) == {"cost"}:
+        return {}
+    return {str(n): float(b) for n, b in constraints.items()}
+
+
 def key_of(entry: Entry) -> str:
-    return entry_key(entry.budget, entry.cost_limit, entry.fingerprint_id)
+    return entry_key(entry.budget, entry.cost_limit, entry.fingerprint_id, entry.constraints)
 
 
 def entry_path(registry: Path, task: str, algo: str, key: str) -> Path:
@@ -268,6 +280,7 @@ def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: 
         params = spaces.trial_params(tp.task, tp.sweep.budget, {**plan.sets}, {"algo": algo, **config})
         fp = fingerprint(tp.task, params)
         limit = float(v["tuned"]["limit"])
+        limits = named_limits(params.get("constraints"))  # several constraints: each one's limit
         search_run = parent_run_id(Path(plan.storage) / plan.name)
         commit, source = search_commit(plan.tracking_uri, search_run)
         gap = v.get("gap")
@@ -279,7 +292,8 @@ def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: 
                               "confirmation_run": confirm_parent},
                       commit=commit, fingerprint=fp, fingerprint_id=fingerprint_id(fp),
                       verdict=IMPROVED if improved else DEFAULT_STANDS, candidate=None if improved else fields,
-                      constraints={"cost": limit}, searcher=plan.sweep.searcher, num_samples=plan.sweep.num_samples,
+                      constraints=limits or {"cost": limit}, searcher=plan.sweep.searcher,
+                      num_samples=plan.sweep.num_samples,
                       random_start=_random_start(plan), search_space=_space(plan.sweep.search),
                       by_seed={"tuned": _by_seed(v["tuned"]), "default": _by_seed(v["default"])},
                       gap=None if gap is None else tuple(_f(x) for x in gap), pairs=v.get("pairs"),
@@ -389,14 +403,13 @@ def read_entry(path: Path) -> Entry:
     return entry
 
 
-def tuned_entry(registry: Path, task: str, algo: str, budget, limit: float, environment: Callable[[dict], dict],
+def tuned_entry(registry: Path, task: str, algo: str, budget, limit: float | dict, environment: Callable[[dict], dict],
                 trial: str = "", tuned_limit: float | None = None) -> tuple[Path, Entry]:
     """The entry ``preset: tuned`` starts a trial of ``algo`` on ``task`` from: tuned at ``budget``, at
     the trial's ``limit`` (or at ``tuned_limit``, where the sweep file names one), in the environment
     the trial has with the entry's fields applied (``environment``: those fields → the trial's
     fingerprint). Refused in one line where there is no entry, or none at that budget, that limit or
     in that environment (the first such entry's difference named)."""
-    from lac_rllib.tasks.fingerprint import differences, fingerprint_id
 
     registry = Path(registry)
     paths = entry_paths(registry, task, algo)
@@ -416,8 +429,24 @@ def tuned_entry(registry: Path, task: str, algo: str, budget, limit: float, envi
         budgets = ", ".join(dict.fromkeys(str(e.budget) for _, e in found))
         raise ValueError(f"preset: tuned: {p} was tuned at budget {e.budget}, this sweep's is {budget}; "
                          f"accepted: budget {budgets}, or tune at {budget}")
+    if isinstance(limit, dict):  # a trial with a limit per constraint: an entry tuned at those limits
+        want_limits = named_limits(limit)
+        at_limits = [(p, e) for p, e in at_budget if named_limits(e.constraints) == want_limits]
+        if not at_limits:
+            p, e = at_budget[0]
+            had = named_limits(e.constraints) or {"the summed cost": e.cost_limit}
+            raise ValueError(f"preset: tuned: {p} was tuned at limits {_limits_text(had)}, trial {trial} runs at "
+                             f"{_limits_text(want_limits)}; accepted: an entry tuned at those limits")
+        return _in_environment(at_limits, environment, trial)
     want = float(limit if tuned_limit is None else tuned_limit)
-    at_limit = [(p, e) for p, e in at_budget if math.isclose(e.cost_limit, want, rel_tol=1e-9, abs_tol=1e-12)]
+    at_limit = [(p, e) for p, e in at_budget if math.isclose(e.cost_limit, want, rel_tol=1e-9, abs_tol=1e-12)
+                and not named_limits(e.constraints)]
+    if not at_limit and all(named_limits(e.constraints) for _, e in at_budget):
+        p, e = at_budget[0]
+        raise ValueError(f"preset: tuned: {p} was tuned with a limit per constraint "
+                         f"({_limits_text(named_limits(e.constraints))}), trial {trial} runs one limit "
+                         f"{_num(want)} on the summed cost; accepted: constraints: {{...}} at those limits in the "
+                         "sweep file, or an entry tuned on the summed cost")
     if not at_limit:
         p, e = at_budget[0]
         limits = ", ".join(dict.fromkeys(_num(e.cost_limit) for _, e in at_budget))
@@ -429,8 +458,20 @@ def tuned_entry(registry: Path, task: str, algo: str, budget, limit: float, envi
                          f"{_num(want)}; accepted: an entry tuned at {_num(want)}, or tuned_limit: "
                          f"{_num(e.cost_limit)} in the sweep file to start every trial from the limit-"
                          f"{_num(e.cost_limit)} entry")
+    return _in_environment(at_limit, environment, trial)
+
+
+def _limits_text(limits: dict) -> str:
+    return ", ".join(f"{n} {_num(b)}" for n, b in sorted(limits.items()))
+
+
+def _in_environment(found: list, environment: Callable[[dict], dict], trial: str) -> tuple[Path, Entry]:
+    """The first of ``found`` (path, entry) tuned in the environment the trial has with its fields
+    applied, or a one-line refusal naming the first one's difference."""
+    from lac_rllib.tasks.fingerprint import differences, fingerprint_id
+
     first = None
-    for p, e in at_limit:
+    for p, e in found:
         now = environment(applied(e))
         if fingerprint_id(now) == e.fingerprint_id:  # read_entry checked the id is its fingerprint's
             return p, e

@@ -52,6 +52,8 @@ BOOL = Accepted("True | False", lambda v: isinstance(v, bool))
 LIMITS = Accepted("a non-empty mapping of constraint names to finite numbers >= 0",
                   lambda v: isinstance(v, dict) and len(v) >= 1
                   and all(isinstance(k, str) and _is_real(b) and b >= 0 for k, b in v.items()))
+NAME = Accepted("a name (letters, digits, _ . -)", lambda v: isinstance(v, str) and bool(v)
+                and len(v) <= 60 and all(ch.isalnum() or ch in "_.-" for ch in v))
 LAYERS = Accepted("a non-empty sequence of integers >= 1",
                   lambda v: isinstance(v, (tuple, list)) and len(v) >= 1 and all(_is_int(h) and h >= 1 for h in v))
 

@@ -22,7 +22,7 @@ from typing import Any, Protocol
 
 import torch
 
-from lac_rllib.constrained.fields import NON_NEGATIVE, or_none, param
+from lac_rllib.constrained.fields import NAME, NON_NEGATIVE, or_none, param
 
 
 class StepRule(Protocol):
@@ -123,12 +123,33 @@ class FixedMultiplierParams:
     nu_fixed: float | None = param(None, accepts=or_none(NON_NEGATIVE))
     """ν for the whole run, never stepped nor bounded (the learning rate, bound and ν₀ of the
     multiplier then change nothing); None = the multiplier learns [D]."""
+    nu_fixed_constraint: str | None = param(None, accepts=or_none(NAME))
+    """With several constraints and ``nu_fixed``: the one constraint whose ν_k it holds, the others'
+    multipliers learning by the algorithm's rule (the frontier along one constraint); None: every ν_k
+    held at ``nu_fixed``."""
 
 
 def initial_nu(model_config: dict[str, Any]) -> float:
     """ν₀ of a module: ``nu_fixed`` where set, else ``nu_init``."""
     fixed = model_config.get("nu_fixed")
     return float(fixed if fixed is not None else model_config["nu_init"])
+
+
+#: A module's model config key: the index of the one constraint ``nu_fixed`` holds (nu_fixed_constraint).
+NU_FIXED_INDEX = "nu_fixed_index"
+
+
+def initial_nus(model_config: dict[str, Any], k: int) -> torch.Tensor:
+    """A module's ν buffer at the start: 0-d with one constraint (:func:`initial_nu`), (K,) with K,
+    each ν_k at ``nu_fixed`` where it holds that one (``nu_fixed_index``) or all, else ``nu_init``."""
+    if k == 1:
+        return torch.tensor(initial_nu(model_config))
+    index = model_config.get(NU_FIXED_INDEX)
+    if index is None:
+        return torch.full((k,), initial_nu(model_config))
+    nus = torch.full((k,), float(model_config["nu_init"]))
+    nus[int(index)] = float(model_config["nu_fixed"])
+    return nus
 
 
 class AdaptiveBound:
@@ -238,9 +259,11 @@ class Multipliers:
     eq. (14) for its constraint alone (Achiam et al. 2017, §6.2, one dual variable per constraint).
     One object with :class:`LagrangeMultiplier`'s interface where the learners use it."""
 
-    def __init__(self, value: torch.Tensor, limits, make):
-        """``make(value_k, b_k)`` builds constraint k's multiplier on ``value[k]``, a view of the buffer."""
-        self.parts = [make(value[k], float(b)) for k, b in enumerate(limits)]
+    def __init__(self, value: torch.Tensor, limits, make, held: int | None = None):
+        """``make(value_k, b_k)`` builds constraint k's multiplier on ``value[k]``, a view of the buffer;
+        constraint ``held``'s is held where it is instead (``nu_fixed_constraint``)."""
+        self.parts = [LagrangeMultiplier(value[k], cost_limit=float(b), rule=HeldStep(), bounded=False) if k == held
+                      else make(value[k], float(b)) for k, b in enumerate(limits)]
 
     def __len__(self) -> int:
         return len(self.parts)
@@ -278,7 +301,9 @@ def multipliers_for(value: torch.Tensor, config, make) -> "LagrangeMultiplier | 
     several = getattr(config, "constraint_set", None)  # a config without constraints: one
     if several is None or len(several) == 1:
         return make(value, config.effective_cost_limit)
-    return Multipliers(value, several.limits, make)
+    held = getattr(config, "nu_fixed_constraint", None) if getattr(config, "nu_fixed", None) is not None else None
+    # The frontier along one constraint: its ν_k held at nu_fixed, the others learning.
+    return Multipliers(value, several.limits, make, held=None if held is None else several.names.index(held))
 
 
 def each_multiplier(multiplier) -> list:
@@ -309,7 +334,7 @@ def restore_multipliers(multipliers: dict, modules, saved: dict) -> None:
 def fixed_multiplier(value: torch.Tensor, config) -> "LagrangeMultiplier | Multipliers | None":
     """The multiplier of a run whose config sets ``nu_fixed`` (ν held at it, unbounded; each ν_k with
     several constraints); None where ν learns (the algorithm's own rule then)."""
-    if getattr(config, "nu_fixed", None) is None:
-        return None
+    if getattr(config, "nu_fixed", None) is None or getattr(config, "nu_fixed_constraint", None) is not None:
+        return None  # learns (with nu_fixed_constraint: the one it names held by multipliers_for)
     return multipliers_for(value, config, lambda v, b: LagrangeMultiplier(v, cost_limit=b, rule=HeldStep(),
                                                                            bounded=False))

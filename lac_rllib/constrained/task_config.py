@@ -23,6 +23,7 @@ from ray.tune.registry import register_env
 from lac_rllib.constrained.costs import EpisodeCostCallback
 from lac_rllib.constrained.cpus import OneThreadPerEnvRunner, set_runners
 from lac_rllib.constrained.fields import BOOL, FRACTION, LIMITS, NON_NEGATIVE, POSITIVE, one_of, or_none, param
+from lac_rllib.constrained.lagrange import NU_FIXED_INDEX
 from lac_rllib.constrained.obs_filter import FlooredMeanStdFilter
 from lac_rllib.tasks import get_task
 from lac_rllib.tasks.constraints import ConstraintSet, select
@@ -262,6 +263,13 @@ class SafeTaskConfig:
             raise ValueError(f"cost_limit={self.cost_limit} and constraints={self.constraints} together; accepted: "
                              "one of them (cost_limit: one limit on the summed cost; constraints: a limit each)")
         several = self.constraint_set
+        held = getattr(self, "nu_fixed_constraint", None)
+        if held is not None and (several is None or len(several) < 2 or held not in several.names
+                                 or self.nu_fixed is None):
+            accepted = (f"one of {', '.join(several.names)} with nu_fixed set" if several is not None
+                        and len(several) > 1 else "None (it names one of several constraints)")
+            raise ValueError(f"nu_fixed_constraint={held!r} with nu_fixed={self.nu_fixed} and constraints="
+                             f"{self.constraints}; accepted: {accepted}")
         if several is not None and len(several) > 1 and not self.SEVERAL_CONSTRAINTS:
             raise ValueError(f"constraints {', '.join(several.names)}: {self.ALGO} trains on one constraint only "
                              "so far; accepted: one constraint (cost_limit, or constraints with one limit), or an "
@@ -300,6 +308,13 @@ class SafeTaskConfig:
         """:attr:`constraint_set` as plain data (a connector's constructor argument), or None."""
         several = self.constraint_set
         return None if several is None else several.as_data()
+
+    def nu_fixed_model_config(self) -> dict:
+        """What a module needs of ``nu_fixed_constraint``: the index of the ν_k it holds, or nothing."""
+        held = getattr(self, "nu_fixed_constraint", None)
+        if held is None or self.constraint_set is None:
+            return {}
+        return {NU_FIXED_INDEX: self.constraint_set.names.index(held)}
 
     @property
     def num_constraints(self) -> int:

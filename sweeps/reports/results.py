@@ -26,6 +26,7 @@ from lac_rllib.constrained.metrics import (
     per_constraint,
 )
 from sweeps.objective import OBJECTIVE, WALL_TIME_S, feasible, objective
+from sweeps.reports.ladder import FRONTIER_GROUP
 from sweeps.score import (
     EVAL_COST,
     EVAL_RETURN,
@@ -183,9 +184,17 @@ def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> 
     if len(limits) > 1:  # several constraints: the joint rule's cost max_k (J_k − b_k) against 0 (sweeps/score.py)
         (ret, cost), used, per = joint_score(kind, curve, metrics or {}, limits)
         # A rung of a ladder along constraint k: the same rule shifted by its limit b_k (cost b_k + the
-        # excess against b_k), so the ladder's report ranks at each rung as at any limit.
-        limit = limits.get(row.get("ladder_constraint") or "", 0.0)
-        cost = cost + limit
+        # excess against b_k), so the ladder's report ranks at each rung as at any limit. A frontier run
+        # along k (its ν_k held; its b_k the ladder's top rung): J_k where every other constraint is
+        # within its limit, else past the top rung by the others' excess (within no rung), so R*(b) is
+        # the best return feasible at b on the joint rule.
+        along = row.get("ladder_constraint") or ""
+        limit = limits.get(along, 0.0)
+        if along in limits and row.get("group") == FRONTIER_GROUP:
+            excess = max(per[n] - b for n, b in limits.items() if n != along)
+            cost = per[along] if excess <= 0 else max(per[along], limit + excess)
+        else:
+            cost = cost + limit
         out.update({"score": used, **{per_constraint(EPISODE_COST, n): c for n, c in per.items()},
                     **{per_constraint(COST_LIMIT, n): b for n, b in limits.items()}, COST_LIMIT: limit})
     if math.isnan(ret) or math.isnan(cost):

@@ -49,3 +49,33 @@ def test_the_binding_constraint_is_held_and_the_slack_one_left_alone(ray_session
     assert last[FEASIBLE] == float(lane[-1] <= LIMITS["lane"] and hazard[-1] <= LIMITS["hazard"])
     assert last[EPISODE_COST] == pytest.approx(lane[-1] + hazard[-1], rel=1e-6)
     assert last[per_constraint(COST_LIMIT, "lane")] == LIMITS["lane"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["lac", "sac_lag", "ppo_lag", "respo"])
+def test_nu_fixed_along_one_constraint_holds_it_and_the_others_learn(ray_session, algo):
+    """The frontier along one constraint: ``nu_fixed_constraint`` holds that ν_k at ``nu_fixed`` on
+    every iteration while the other constraint's multiplier steps on its own cost (the hazard's limit
+    0: any hazard cost raises it)."""
+    sets = {"constraints": {"hazard": 0.0, "lane": 10.0}, "nu_fixed": 0.5, "nu_fixed_constraint": "lane",
+            **SETS.get(algo, {})}
+    config = registry.build_config(algo, TASK, 0, sets, timesteps=100_000)
+    algo_obj = config.build_algo()
+    try:
+        rows = [iteration_row(algo_obj.train()) for _ in range(4)]
+    finally:
+        algo_obj.stop()
+    lane = [r[per_constraint(NU, "lane")] for r in rows if per_constraint(NU, "lane") in r]
+    hazard = [r[per_constraint(NU, "hazard")] for r in rows if per_constraint(NU, "hazard") in r]
+    assert lane and all(v == 0.5 for v in lane), lane
+    assert max(hazard) > 0.0, hazard
+
+
+def test_nu_fixed_constraint_names_one_of_several():
+    for sets, needle in (({"nu_fixed": 0.5, "nu_fixed_constraint": "lane"}, "accepted: None"),
+                         ({"constraints": {"hazard": 1.0, "lane": 2.0}, "nu_fixed_constraint": "lane"},
+                          "accepted: one of hazard, lane with nu_fixed set"),
+                         ({"constraints": {"hazard": 1.0, "lane": 2.0}, "nu_fixed": 0.5, "nu_fixed_constraint": "x"},
+                          "nu_fixed_constraint='x'")):
+        with pytest.raises(ValueError, match=needle):
+            registry.build_config("ppo_lag", TASK, 0, sets, timesteps=10_000)

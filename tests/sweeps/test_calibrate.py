@@ -76,3 +76,29 @@ def test_calibrate_a_users_env_through_its_factory(tmp_path, monkeypatch, capsys
 def test_bad_arguments_are_one_line_before_anything_runs(capsys, argv, needle):
     code, _, err = _run(capsys, *argv)
     assert code == 2 and needle in err and err.count("\n") == 1, err
+
+
+@pytest.mark.slow
+def test_calibrate_a_ladder_along_one_constraint(tmp_path, capsys):
+    """--constraint lane: both runs' costs are the lane's alone (a random walk from near the x axis
+    pays about half its steps; the hazard, ~1, left out), and the snippet runs a ladder along it."""
+    out = tmp_path / "lane.yaml"
+    code, stdout, err = _run(capsys, "--task", "lac/PointTwoCosts-v0", "--constraint", "lane", "--algo", "ppo_lag",
+                             "--timesteps", "4000", "--episodes", "4", "--out", str(out))
+    assert code == 0, err
+    snippet = yaml.safe_load(out.read_text())
+    assert snippet["ladder_constraint"] == "lane" and snippet["cost_limits"] == sorted(snippet["cost_limits"])
+    rand = float(out.read_text().split("cost ")[1].split()[0])
+    from lac_rllib.tasks import get_task
+
+    summed, _, _ = calibrate.random_episode_costs(get_task("lac/PointTwoCosts-v0"), 4, 0)
+    lane, _, _ = calibrate.random_episode_costs(get_task("lac/PointTwoCosts-v0"), 4, 0, "lane")
+    hazard, _, _ = calibrate.random_episode_costs(get_task("lac/PointTwoCosts-v0"), 4, 0, "hazard")
+    assert rand == pytest.approx(sum(lane) / 4, rel=1e-2) and lane != summed
+    assert [a + b for a, b in zip(lane, hazard)] == pytest.approx(summed)
+
+
+def test_a_constraint_the_task_lacks_is_refused_before_anything_runs(capsys):
+    code, _, err = _run(capsys, "--task", "lac/PointTwoCosts-v0", "--constraint", "vases")
+    assert code == 2 and "--constraint vases: lac/PointTwoCosts-v0 has no constraint 'vases'; accepted: hazard, lane" \
+        in err and err.count("\n") == 1, err

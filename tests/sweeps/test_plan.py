@@ -355,3 +355,16 @@ def test_a_ladder_along_one_constraint_keeps_the_others_at_their_limits(tmp_path
                     "ladder_constraint: lane\n")
     with pytest.raises(ValueError, match=r"ladder_constraint lane without constraints; accepted: with constraints"):
         _plan(tmp_path, monkeypatch, "--config", str(bare))
+
+
+def test_a_frontier_along_one_constraint_holds_its_multiplier_and_lets_the_others_learn(tmp_path, monkeypatch):
+    sweep = tmp_path / "along.yaml"
+    sweep.write_text("task: lac/PointTwoCosts-v0\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\n"
+                     "constraints: {hazard: 2}\ncost_limits: [5, 20]\nladder_constraint: lane\n"
+                     "frontier: {algo: ppo_lag, nu: [0.0, 1.0]}\n")
+    plan = _plan(tmp_path, monkeypatch, "--config", str(sweep))
+    front = [t.params for t in plan.trials if t.group == "frontier"]
+    assert [(p["nu_fixed"], p["nu_fixed_constraint"]) for p in front] == [(0.0, "lane"), (1.0, "lane")]
+    assert all(p["constraints"] == {"hazard": 2.0, "lane": 20.0} for p in front)
+    rungs = [t.params["constraints"] for t in plan.trials if t.group != "frontier"]
+    assert rungs == [{"hazard": 2.0, "lane": 5.0}, {"hazard": 2.0, "lane": 20.0}]

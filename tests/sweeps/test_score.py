@@ -141,3 +141,14 @@ def test_the_summary_says_a_ladder_along_a_constraint_is_shifted():
 
     two = pd.DataFrame({"cost_limit/hazard": [2.0], "cost_limit/lane": [10.0], "ladder_constraint": ["lane"]})
     assert "On the ladder along lane both are shifted by the rung's limit b" in constraints_note(two)
+
+
+def test_a_frontier_run_along_a_constraint_is_that_constraints_cost_where_the_others_hold():
+    limits = {"cost_limit/hazard": 2.0, "cost_limit/lane": 20.0}
+    curve = _curve([7.0] * 20)
+    curve["episode_cost/hazard"], curve["episode_cost/lane"] = 1.0, 6.0
+    row = {"episode_return": 9.0, "episode_cost": 7.0, "cost_limit": 22.0, "feasible": 1.0, "objective": 9.0,
+           "ladder_constraint": "lane", "group": "frontier"}
+    assert scored(row, curve, dict(limits), score.TRAIN)["episode_cost"] == 6.0  # J_lane: feasible at b >= 6
+    curve["episode_cost/hazard"] = 3.0  # the hazard over its limit by 1: past the top rung (20) by 1
+    assert scored(row, curve, dict(limits), score.TRAIN)["episode_cost"] == 21.0

@@ -218,3 +218,36 @@ def test_the_commit_is_the_one_the_search_ran_at(tmp_path):
     assert search_commit(uri, "no-such-run")[1] == COMMIT_AT_WRITE
     assert search_commit(f"sqlite:///{tmp_path / 'absent.db'}", run)[1] == COMMIT_AT_WRITE
     assert not (tmp_path / "absent.db").exists()
+
+
+def test_an_entry_tuned_with_a_limit_per_constraint_is_kept_by_them_and_refused_elsewhere(tmp_path):
+    """An entry tuned with constraints {hazard: 2, lane: 10} carries them (its key names them); preset:
+    tuned starts trials at those limits from it, and refuses other limits, and a trial on the summed
+    cost (whose environment differs: the fingerprint names the constraints) in one line each."""
+    from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
+    from sweeps.tuned_registry import entry_key
+
+    task, limits = "lac/PointTwoCosts-v0", {"hazard": 2.0, "lane": 10.0}
+    config = FIELDS["ppo_lag"]
+    fp = fingerprint(task, spaces.trial_params(task, "smoke", {"algo": "ppo_lag", "constraints": limits, **config}))
+    key = entry_key("smoke", 0.0, fingerprint_id(fp), limits)
+    assert key == f"smoke-hazard2-lane10-{fingerprint_id(fp)}"
+    scores = {"n_seeds": 2, "return_mean": 1.0, "return_ci": [0.5, 1.5], "cost_mean": -1.0, "cost_ci": [-2.0, 0.0],
+              "p_feasible": 1.0}
+    path = tmp_path / "registry" / task / "ppo_lag" / f"{key}.yaml"
+    path.parent.mkdir(parents=True)
+    path.write_text(yaml.safe_dump({
+        "task": task, "algo": "ppo_lag", "budget": "smoke", "timesteps": 2000, "cost_limit": 0.0, "config": config,
+        "search_seeds": [0], "fresh_seeds": [1, 2], "fresh": scores, "default_fresh": scores, "search": {},
+        "mlflow": {"tracking_uri": "sqlite:///x.db"}, "commit": "abc", "fingerprint": fp,
+        "fingerprint_id": fingerprint_id(fp), "constraints": limits}))
+    base = f"task: {task}\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\npreset: tuned\n"
+    plan, = cli.make_plan(_args(tmp_path, base + "constraints: {hazard: 2, lane: 10}\n"))
+    assert all(t.params["lr"] == 0.002 and t.params["constraints"] == limits for t in plan.trials)
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, base + "constraints: {hazard: 2, lane: 5}\n", "--name", "x2"))
+    assert "was tuned at limits hazard 2, lane 10, trial" in str(e.value) and "runs at hazard 2, lane 5" in str(e.value)
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, base + "set: {cost_limit: 0}\n", "--name", "x3"))
+    assert "was tuned with a limit per constraint (hazard 2, lane 10), trial" in str(e.value)
+    assert "runs one limit 0 on the summed cost" in str(e.value) and "\n" not in str(e.value), str(e.value)

@@ -24,7 +24,7 @@ from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.lac.langevin import ChainResult, ChainSettings, langevin_chain
-from lac_rllib.constrained.lagrange import initial_nu
+from lac_rllib.constrained.lagrange import initial_nus
 from lac_rllib.constrained.networks import CriticEnsemble, GaussianActor
 from lac_rllib.constrained.precision import resolve_dtype
 from lac_rllib.families.off_policy.module import ActorCriticRLModule
@@ -52,7 +52,7 @@ class LACTorchRLModule(ActorCriticRLModule):
             mean_init_scale=cfg["actor_mean_init_scale"],
         )
         k = int(cfg.get("num_constraints", 1))  # K constraints: ν (K,) and twin cost critics each
-        self.register_buffer("nu", torch.tensor(initial_nu(cfg)) if k == 1 else torch.full((k,), initial_nu(cfg)))
+        self.register_buffer("nu", initial_nus(cfg, k))
         if not self.inference_only:
             self.critics = CriticEnsemble(obs_dim, act_dim, hidden=tuple(cfg["critic_hidden"]),
                                           **({"n_cost": 2 * k} if k > 1 else {}))

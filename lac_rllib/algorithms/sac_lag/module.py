@@ -26,7 +26,7 @@ from ray.rllib.utils.annotations import override
 
 from lac_rllib.algorithms.sac_lag.config import critic_matmul_dtype
 from lac_rllib.algorithms.sac_lag.networks import SquashedGaussianActor, squash, squashed_gaussian, squashed_log_prob
-from lac_rllib.constrained.lagrange import initial_nu
+from lac_rllib.constrained.lagrange import initial_nus
 from lac_rllib.constrained.networks import CriticEnsemble
 from lac_rllib.constrained.precision import TORCH_DTYPES
 from lac_rllib.families.off_policy.module import ActorCriticRLModule
@@ -54,7 +54,7 @@ class SACLagTorchRLModule(ActorCriticRLModule):
                                            log_std_max=cfg["log_std_max"])
         # K constraints: λ (K,) and a cost critic each (one ensemble of K members).
         self.num_constraints = k = int(cfg.get("num_constraints", 1))
-        self.register_buffer("nu", torch.tensor(initial_nu(cfg)) if k == 1 else torch.full((k,), initial_nu(cfg)))
+        self.register_buffer("nu", initial_nus(cfg, k))
         # The action bounds as buffers: they move with the module to its device, and a restored
         # module's state is complete (lac_rllib.evaluation checks every buffer is restored).
         self.register_buffer("action_low", torch.tensor(np.array(self.action_space.low), dtype=torch.float32))

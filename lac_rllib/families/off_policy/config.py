@@ -57,7 +57,8 @@ class OffPolicyConfig(SafeTaskConfig):
     def _model_config_auto_includes(self) -> dict:
         # Several constraints: the module builds a cost critic group and a ν per constraint.
         k = self.num_constraints
-        return {**super()._model_config_auto_includes, **({"num_constraints": k} if k > 1 else {})}
+        return {**super()._model_config_auto_includes, **({"num_constraints": k} if k > 1 else {}),
+                **self.nu_fixed_model_config()}
 
     def minibatch_rows(self) -> ConnectorV2:
         """The learner connector piece that orders the buffer's rows for the iteration's minibatches:

@@ -278,5 +278,8 @@ class OnPolicyConfig(SafeTaskConfig, PPOConfig):
                 "nu_init": initial_nu({"nu_init": getattr(self, "nu_init", 0.0),
                                        "nu_fixed": getattr(self, "nu_fixed", None)}),
                 "normalize_actions": self.normalize_actions,
-                # several constraints: a cost critic and a multiplier each (absent: one)
-                **({"num_constraints": self.num_constraints} if self.num_constraints > 1 else {})}
+                # several constraints: a cost critic and a multiplier each (absent: one); the frontier
+                # along one of them: ν₀ nu_fixed for the one it holds, nu_init for the others
+                **({"num_constraints": self.num_constraints} if self.num_constraints > 1 else {}),
+                **({"nu_init": float(self.nu_init), "nu_fixed": self.nu_fixed, **self.nu_fixed_model_config()}
+                   if self.nu_fixed_model_config() else {})}

@@ -25,7 +25,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.utils.annotations import override
 
-from lac_rllib.constrained.lagrange import initial_nu
+from lac_rllib.constrained.lagrange import initial_nus
 
 
 class CostCritic(torch.nn.Module):
@@ -60,7 +60,7 @@ class OnPolicyTorchRLModule(DefaultPPOTorchRLModule):
             raise ValueError("the on-policy family needs separate networks (vf_share_layers=False): one optimizer "
                              "per network")
         k = int(cfg.get("num_constraints", 1))
-        self.register_buffer("nu", torch.tensor(initial_nu(cfg)) if k == 1 else torch.full((k,), initial_nu(cfg)))
+        self.register_buffer("nu", initial_nus(cfg, k))
         with torch.no_grad():  # RLlib starts the free log σ at 0 [O]; [S] at −0.5
             self.pi.log_std.fill_(float(cfg["log_std_init"]))
         # deleted again on env runners (inference-only)
