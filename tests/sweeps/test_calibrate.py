@@ -84,7 +84,7 @@ def test_calibrate_a_ladder_along_one_constraint(tmp_path, capsys):
     pays about half its steps; the hazard, ~1, left out), and the snippet runs a ladder along it."""
     out = tmp_path / "lane.yaml"
     code, stdout, err = _run(capsys, "--task", "lac/PointTwoCosts-v0", "--constraint", "lane", "--algo", "ppo_lag",
-                             "--timesteps", "4000", "--episodes", "4", "--out", str(out))
+                             "--timesteps", "2000", "--episodes", "4", "--out", str(out))
     assert code == 0, err
     snippet = yaml.safe_load(out.read_text())
     assert snippet["ladder_constraint"] == "lane" and snippet["cost_limits"] == sorted(snippet["cost_limits"])
