@@ -117,3 +117,48 @@ def test_auto_dtype_is_bfloat16_only_with_native_bf16_matmuls(monkeypatch):
         assert precision.resolve_dtype("auto") == expected
         assert chain_settings(cfg, space).dtype == expected  # decided where the module is built
     assert precision.resolve_dtype("float32") == "float32"  # an explicit dtype is kept
+
+
+def _two_constraints(seed=0, batch=64, steps=20):
+    """An ensemble of 2 reward and 2 × 2 cost critics (two constraints, twin critics each), ν (2,)."""
+    torch.manual_seed(seed)
+    critics = CriticEnsemble(9, 3, hidden=(64, 64, 64), n_cost=4)
+    actor = GaussianActor(9, 3)
+    obs = torch.randn(batch, 9)
+    with torch.no_grad():
+        mean, log_std = actor(obs)
+    nu = torch.tensor([0.7, 2.5])
+    kw = dict(steps=steps, step_size=ETA, temperature=1e-3, nu=nu, noise=torch.randn(steps + 1, batch, 3),
+              low=-torch.ones(3), high=torch.ones(3))
+    return critics, obs, mean, log_std, nu, kw
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_with_two_constraints_the_energy_weighs_each_ones_max_by_its_nu(compiled):
+    """E = (Σ_k ν_k·max_j Q_Ckj − min_j Q_Rj)/λ − log π, its action gradient the same as autograd's,
+    on both paths (the compiled one the chain of every navigation preset)."""
+    critics, obs, mean, log_std, nu, kw = _two_constraints()
+    ref = chain(critics, obs, mean, log_std, grad_clip=1000.0, **kw)
+    grad_fn = energy_module.make_grad_fn(critics, critics.project_state(obs), mean, log_std, temperature=1e-3,
+                                        nu=nu, logp_weight=1.0, compiled=compiled)
+    energy, grad = grad_fn(ref.action)
+    assert not energy_module._compile_failed, "torch.compile fell back to eager: nothing was compared"
+    with torch.enable_grad():
+        a = ref.action.clone().requires_grad_(True)
+        q = critics(obs, a)
+        logp = torch.distributions.Normal(mean, log_std.exp()).log_prob(a).sum(-1)
+        cost = 0.7 * q[2:4].max(0).values + 2.5 * q[4:6].max(0).values
+        e = (cost - q[:2].min(0).values) / 1e-3 - logp
+        (g,) = torch.autograd.grad(e.sum(), a)
+    torch.testing.assert_close(energy, e.detach(), rtol=1e-5, atol=1e-3)
+    torch.testing.assert_close(grad, g, rtol=1e-4, atol=1e-3)
+    # one ν for both constraints would be another energy: the test can tell them apart
+    assert not torch.allclose(energy, ((1.6 * q[2:].max(0).values - q[:2].min(0).values) / 1e-3 - logp).detach(),
+                              rtol=1e-5, atol=1e-3)
+
+
+def test_with_two_constraints_the_bfloat16_chain_runs_and_stays_near_float32():
+    critics, obs, mean, log_std, nu, kw = _two_constraints()
+    f32 = chain(critics, obs, mean, log_std, grad_clip=1000.0, fused=True, **kw)
+    bf16 = chain(critics, obs, mean, log_std, grad_clip=1000.0, fused=True, dtype="bfloat16", **kw)
+    assert torch.isfinite(bf16.action).all() and (bf16.action - f32.action).abs().max() < 0.05
