@@ -28,6 +28,7 @@ from lac_rllib.constrained.metrics import (
 from sweeps.objective import OBJECTIVE, WALL_TIME_S, feasible, objective
 from sweeps.reports.ladder import FRONTIER_GROUP
 from sweeps.score import (
+    EVAL,
     EVAL_COST,
     EVAL_RETURN,
     LAST_COST,
@@ -37,8 +38,10 @@ from sweeps.score import (
     TRAIN_COST,
     TRAIN_RETURN,
     constraint_limits,
+    constraint_scores,
     declared,
     eval_score,
+    joint_cost,
     joint_curve,
     joint_score,
     train_score,
@@ -190,13 +193,22 @@ def scored(row: dict, curve, metrics: dict | None = None, kind: str = TRAIN) -> 
         # the best return feasible at b on the joint rule.
         along = row.get("ladder_constraint") or ""
         limit = limits.get(along, 0.0)
-        if along in limits and row.get("group") == FRONTIER_GROUP:
-            excess = max(per[n] - b for n, b in limits.items() if n != along)
-            cost = per[along] if excess <= 0 else max(per[along], limit + excess)
-        else:
-            cost = cost + limit
+        frontier = along in limits and row.get("group") == FRONTIER_GROUP
+
+        def judged(costs: dict) -> float:
+            if frontier:
+                excess = max(costs[n] - b for n, b in limits.items() if n != along)
+                return costs[along] if excess <= 0 else max(costs[along], limit + excess)
+            return joint_cost(costs, limits) + limit
+
+        cost = judged(per)
+        # Both scores beside on the same rule (the summed costs kept as summed_*).
+        (train_per, _), (eval_per, eval_used) = (constraint_scores(k, curve, metrics or {}, limits)
+                                                 for k in (TRAIN, EVAL))
         out.update({"score": used, **{per_constraint(EPISODE_COST, n): c for n, c in per.items()},
-                    **{per_constraint(COST_LIMIT, n): b for n, b in limits.items()}, COST_LIMIT: limit})
+                    **{per_constraint(COST_LIMIT, n): b for n, b in limits.items()}, COST_LIMIT: limit,
+                    f"summed_{TRAIN_COST}": out[TRAIN_COST], f"summed_{EVAL_COST}": out[EVAL_COST],
+                    TRAIN_COST: judged(train_per), EVAL_COST: judged(eval_per) if eval_used == EVAL else math.nan})
     if math.isnan(ret) or math.isnan(cost):
         return out
     return {**out, EPISODE_RETURN: ret, EPISODE_COST: cost, FEASIBLE: float(feasible(cost, limit)),

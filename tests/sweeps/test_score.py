@@ -152,3 +152,16 @@ def test_a_frontier_run_along_a_constraint_is_that_constraints_cost_where_the_ot
     assert scored(row, curve, dict(limits), score.TRAIN)["episode_cost"] == 6.0  # J_lane: feasible at b >= 6
     curve["episode_cost/hazard"] = 3.0  # the hazard over its limit by 1: past the top rung (20) by 1
     assert scored(row, curve, dict(limits), score.TRAIN)["episode_cost"] == 21.0
+
+
+def test_with_several_constraints_both_scores_beside_read_the_joint_rule():
+    limits = {"cost_limit/hazard": 2.0, "cost_limit/lane": 10.0}
+    curve = _curve([11.0] * 20)
+    curve["episode_cost/hazard"], curve["episode_cost/lane"] = 0.0, 11.0
+    row = {"episode_return": 9.0, "episode_cost": 11.0, "cost_limit": 12.0, "feasible": 1.0, "objective": 9.0}
+    evaluated = {**limits, score.EVAL_RETURN_KEY: 5.0, score.EVAL_COST_KEY: 10.0,
+                 "eval/generator/cost_mean/hazard": 1.0, "eval/generator/cost_mean/lane": 9.0}
+    out = scored(row, curve, evaluated, score.EVAL)
+    assert (out["train_cost"], out["eval_cost"]) == (1.0, -1.0)  # the joint rule's, as the score
+    assert (out["summed_train_cost"], out["summed_eval_cost"]) == (11.0, 10.0)
+    assert math.isnan(scored(row, curve, dict(limits), score.TRAIN)["eval_cost"])
