@@ -217,8 +217,8 @@ class SweepTrial(tune.Trainable):
             # checks one against the other (sweeps/integrity.py).
             self.tracker.set_tags({CHECKSUM_TAG: manifest_tag(os.path.join(tmp, "checkpoint"))})
             self.tracker.log_artifacts(os.path.join(tmp, "checkpoint"), "checkpoint")
-            several = self.algo_config.constraint_set
-            names = several.names if several is not None and len(several) > 1 else ()
+            several = self.algo_config.several_constraints
+            names = several.names if several is not None else ()
             curve = learning_curve(self.tracker.client, self.tracker.run_id, self.algo_config.effective_cost_limit,
                                    names)
             trial_curve(curve, os.path.join(tmp, "learning_curve.png"), self.trial_name)

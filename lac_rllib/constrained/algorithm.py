@@ -140,8 +140,8 @@ class SafeAlgorithm(Algorithm):
             self._last_constraint_costs = np.mean(constraint_costs, axis=0).tolist()
         ret, cost = self._last_episode_stats
         limit = self.config.effective_cost_limit
-        several = self.config.constraint_set
-        if several is not None and len(several) > 1:
+        several = self.config.several_constraints
+        if several is not None:
             for name, c, b in zip(several.names, self._last_constraint_costs, several.limits):
                 self.metrics.log_value(per_constraint(EPISODE_COST, name), c, window=1)
                 self.metrics.log_value(per_constraint(COST_LIMIT, name), b, window=1)

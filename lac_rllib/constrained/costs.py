@@ -58,7 +58,6 @@ class AddCostsFromInfos(ConnectorV2):
 
     def __init__(self, *args, constraints: dict | None = None, **kwargs):
         super().__init__(*args, **kwargs)
-        self.constraints = constraints
         self._set = None if constraints is None else ConstraintSet.from_data(constraints)
 
     def row_costs(self, infos) -> np.ndarray:

@@ -265,16 +265,9 @@ class Multipliers:
         self.parts = [LagrangeMultiplier(value[k], cost_limit=float(b), rule=HeldStep(), bounded=False) if k == held
                       else make(value[k], float(b)) for k, b in enumerate(limits)]
 
-    def __len__(self) -> int:
-        return len(self.parts)
-
     @property
     def value(self) -> list[float]:
         return [m.value for m in self.parts]
-
-    @property
-    def upper(self) -> list[float | None]:
-        return [m.upper for m in self.parts]
 
     def bind(self, value: torch.Tensor) -> None:
         for k, m in enumerate(self.parts):

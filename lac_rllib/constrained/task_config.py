@@ -270,7 +270,7 @@ class SafeTaskConfig:
                         and len(several) > 1 else "None (it names one of several constraints)")
             raise ValueError(f"nu_fixed_constraint={held!r} with nu_fixed={self.nu_fixed} and constraints="
                              f"{self.constraints}; accepted: {accepted}")
-        if several is not None and len(several) > 1 and not self.SEVERAL_CONSTRAINTS:
+        if self.several_constraints is not None and not self.SEVERAL_CONSTRAINTS:
             raise ValueError(f"constraints {', '.join(several.names)}: {self.ALGO} trains on one constraint only "
                              "so far; accepted: one constraint (cost_limit, or constraints with one limit), or an "
                              "algorithm that trains on several (docs/constraints.md)")
@@ -303,6 +303,13 @@ class SafeTaskConfig:
         if spec is None:
             raise ValueError("constraints set and no task is set: call .task(id) first")
         return select(spec.constraints, self.constraints, task_id=spec.id)
+
+    @property
+    def several_constraints(self) -> ConstraintSet | None:
+        """:attr:`constraint_set` where it holds two or more constraints apart (a cost critic and a
+        multiplier each), else None: a run on one cost, however it is read."""
+        several = self.constraint_set
+        return several if several is not None and len(several) > 1 else None
 
     def constraints_data(self) -> dict | None:
         """:attr:`constraint_set` as plain data (a connector's constructor argument), or None."""

@@ -103,6 +103,9 @@ class LACTorchLearner(TorchLearner):
         )
         self._iteration = 0
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
+        #: Each module's constraint names where it holds several apart (None: one), read once here.
+        self.constraint_names = {mid: getattr(self.config.get_config_for_module(mid).several_constraints, "names", None)
+                                 for mid in self.module.keys()}
 
     def make_multiplier(self, module_id, module) -> LagrangeMultiplier | Multipliers:
         """ν of ``module``: eq. (14)'s gradient step, under [C]'s bound when ``nu_max_adaptive``; or
@@ -144,17 +147,12 @@ class LACTorchLearner(TorchLearner):
         iteration's mean targets ȳ_R, ȳ_C (logged)."""
         super().after_gradient_based_update(timesteps=timesteps)  # steps the lr schedules
         for mid, multiplier in self.multipliers.items():
-            names = self.constraint_names(mid)
+            names = self.constraint_names[mid]
             for k, part in enumerate(each_multiplier(multiplier)):
                 means = part.bound.end_iteration()
                 if means is not None:
                     self.metrics.log_dict({TARGET_REWARD_MEAN: means[0],
                                            self.key(TARGET_COST_MEAN, names, k): means[1]}, key=mid, window=1)
-
-    def constraint_names(self, module_id) -> tuple[str, ...] | None:
-        """The names of a module's K constraints, None with one (its metrics keep their plain keys)."""
-        several = self.config.get_config_for_module(module_id).constraint_set
-        return several.names if several is not None and len(several) > 1 else None
 
     @staticmethod
     def key(key: str, names, k: int) -> str:
@@ -187,7 +185,7 @@ class LACTorchLearner(TorchLearner):
         actor_loss = nll + config.beta * kl
 
         with torch.no_grad():
-            multiplier, names = self.multipliers[module_id], self.constraint_names(module_id)
+            multiplier, names = self.multipliers[module_id], self.constraint_names[module_id]
             parts = each_multiplier(multiplier)
             for k, part in enumerate(parts):  # y_C (B,), or its rows of constraint k's twin critics
                 part.bound.observe(y_r, y_c if names is None else y_c[k * (len(y_c) // len(parts))])

@@ -41,8 +41,8 @@ class P3OTorchLearner(OnPolicyTorchLearner):
         self.cost_gaps = {}
         for mid, window in self.cost_windows.items():
             config = self.config.get_config_for_module(mid)
-            several = config.constraint_set
-            if several is not None and len(several) > 1:  # K gaps Ĵ_Ck − b_k
+            several = config.several_constraints
+            if several is not None:  # K gaps Ĵ_Ck − b_k
                 j_c = self.cost_window_means.get(mid)
                 self.cost_gaps[mid] = None if j_c is None else [c - b for c, b in zip(j_c, several.limits)]
                 continue

@@ -114,9 +114,8 @@ class SACLagTorchLearner(FusedMinibatchLoop, TorchLearner):
             lambda mid, mod: mod.make_target_networks() if isinstance(mod, TargetNetworkAPI) else None)
         self.updates = 0  # gradient steps so far: decides the policy-delay steps
         self.cost_window: deque = deque(maxlen=self.config.cost_window)  # K-lists with K constraints
-        several = self.config.constraint_set
         #: The names of K > 1 constraints (None: one), whose costs the window holds per episode.
-        self.constraint_names = several.names if several is not None and len(several) > 1 else None
+        self.constraint_names = getattr(self.config.several_constraints, "names", None)
         self.multipliers = {mid: self.make_multiplier(mid, module) for mid, module in self.module.items()}
         self._cost_this_call: float | None = None  # Ĵ_C of the current update call; None: no λ step
         self._last: dict[str, dict[str, torch.Tensor]] = {}  # the last minibatch's metrics per module

@@ -143,8 +143,7 @@ class OnPolicyTorchLearner(FusedMinibatchLoop, PPOTorchLearner):
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)
         for mid in self.module.keys():
-            several = self.config.get_config_for_module(mid).constraint_set
-            several = several if several is not None and len(several) > 1 else None
+            several = self.config.get_config_for_module(mid).several_constraints
             # With K constraints each entry is an episode's K costs, Ĵ_C their mean: K values.
             costs = list(timesteps.get(TS_CONSTRAINT_COSTS if several else TS_EPISODE_COSTS) or [])
             window = self.cost_windows[mid]
