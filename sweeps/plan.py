@@ -248,7 +248,8 @@ def resolve_tasks(sweep: SweepFile, search_dirs: tuple[str, ...] = (), origin: s
         try:
             spec = user_task(task.task_id(), factory=task.factory, gym_id=task.id, cost_limit=task.cost_limit,
                              episode_cost_discount=task.episode_cost_discount, cost_key=task.cost_key,
-                             preset=task.preset, kwargs=task.kwargs, search_dirs=search_dirs)
+                             preset=task.preset, kwargs=task.kwargs, search_dirs=search_dirs,
+                             constraints=task.constraints)
         except ValueError as e:
             raise ValueError(f"{origin(('task', i))}: {e}") from None
         ids.append(spec.id)

@@ -222,6 +222,10 @@ class UserEnv(BaseModel):
     Table 4 for continuous control, the general case."""
     kwargs: dict[str, Any] = {}
     """Passed to the factory (merged into its env config) or to ``gym.make``."""
+    constraints: dict[Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,60}$")],
+                      Annotated[str, StringConstraints(min_length=1, max_length=100)]] | None = None
+    """Its constraints, each a name and the ``info`` key of its step cost (``{speed: speed_cost}``), that a
+    sweep's ``constraints`` may give limits (docs/constraints.md); checked on its first steps."""
     name: Annotated[str, AfterValidator(_task_name)] | None = None
     """The task's name in the sweep, its runs and labels (default: ``user/<function or id>``)."""
 

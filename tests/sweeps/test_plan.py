@@ -368,3 +368,22 @@ def test_a_frontier_along_one_constraint_holds_its_multiplier_and_lets_the_other
     assert all(p["constraints"] == {"hazard": 2.0, "lane": 20.0} for p in front)
     rungs = [t.params["constraints"] for t in plan.trials if t.group != "frontier"]
     assert rungs == [{"hazard": 2.0, "lane": 5.0}, {"hazard": 2.0, "lane": 20.0}]
+
+
+def test_a_users_env_in_a_sweep_file_declares_its_constraints(tmp_path, monkeypatch):
+    """``task: {factory: ..., constraints: {name: info_key}}``: a sweep's ``constraints`` gives that
+    name a limit; a declared key its info lacks is refused before Ray, named with the keys it has."""
+    import shutil
+    import sys
+
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    shutil.copy(Path(__file__).parent / "user_envs.py", tmp_path / "user_envs.py")
+    env = "{factory: 'user_envs:make_safe', cost_limit: 5, cost_key: violation, preset: tiny, name: mine/Line-v0"
+    sweep = tmp_path / "mine.yaml"
+    sweep.write_text(f"task: {env}, constraints: {{right: violation}}}}\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\n"
+                     "constraints: {right: 3}\n")
+    (trial,) = _plan(tmp_path, monkeypatch, "--config", str(sweep)).trials
+    assert trial.params["constraints"] == {"right": 3.0}
+    sweep.write_text(f"task: {env}, constraints: {{right: speed}}}}\nalgo: ppo_lag\nbudget: smoke\nseeds: 1\n")
+    with pytest.raises(ValueError, match=r"no 'speed', the key of constraint 'right' \(keys: \['violation'\]\)"):
+        _plan(tmp_path, monkeypatch, "--config", str(sweep), "--name", "x2")
