@@ -101,6 +101,13 @@ def _algo_section(algo: str, first: bool) -> list[str]:
                      else "one of " + ", ".join(f"{a:g}" if isinstance(a, float) else str(a) for a in d.args)
                      if d.kind == "choice" else " to ".join(map(str, d.args)))
             out.append(f"| `{n}` | {d.kind} | {where} | {_cell(d.source)} |")
+    changeable = mod.changeable_space() if hasattr(mod, "changeable_space") else {}
+    if changeable:  # what population-based training may change mid-run (sweeps/pbt.py)
+        extra = {n: d for n, d in changeable.items() if n not in mod.SEARCH_SPACE}
+        out += ["", f"Population-based training (`search: pbt`) changes {', '.join(f'`{n}`' for n in changeable)} "
+                "mid-run (`CHANGEABLE`" + (": the search space and " + ", ".join(
+                    f"`{n}` ({d.kind}, {_cell(d.source)})" for n, d in extra.items()) if extra else
+                ": the search space") + ")."]
     return out
 
 

@@ -23,7 +23,7 @@ from sweeps.sweep_file import SweepFile
 CONFIRM = "confirm"
 #: What a confirmation does not take from the sweep it confirms: how that sweep chose its
 #: configurations (the groups replace it) and its name, seeds, budget and description.
-NOT_CONFIRMED = ("search", "grid", "groups", "groups_at", "searcher", "num_samples", "tune", "name", "seeds",
+NOT_CONFIRMED = ("search", "grid", "groups", "groups_at", "searcher", "num_samples", "tune", "pbt", "name", "seeds",
                  "budget", "description")
 
 
@@ -74,7 +74,8 @@ def confirmation_file(sweep: SweepFile, top: list[dict], seeds: int, budget, nam
 
     # A sweep of several algorithms (``algo: [...]``): each winner names its own, and there is no one default.
     several = len(sweep.algo) > 1
-    groups = {w["group"]: {"set": w["fields"]} for w in top} | ({} if several else {DEFAULT_GROUP: {}})
+    groups = {w["group"]: {"set": w["fields"], **({"schedule": w["schedule"]} if w.get("schedule") else {})}
+              for w in top} | ({} if several else {DEFAULT_GROUP: {}})
     groups |= {f"{BASELINE}{algo}": {"set": {"algo": algo}} for algo in baselines}
     return build_confirmation(sweep, groups, sweep.seed_list(), seeds, budget, name, f"confirmation of {sweep.name}",
                         drop=("algo",) if several else ())
@@ -94,6 +95,13 @@ def confirm_top(plan) -> tuple[SweepFile, list[dict]] | None:
     values = fields_of(trials, fields)
     if not len(trials):
         top = []
+    elif plan.sweep.searcher == "pbt":  # a member's schedule, not a point (sweeps/pbt.py)
+        from sweeps.pbt import winners
+        from sweeps.record import parent_run_id
+        from sweeps.tracking import SweepTracker
+
+        top = winners(trials, k, SweepTracker(plan.tracking_uri, plan.experiment).client,
+                      parent_run_id(Path(plan.storage) / plan.name))
     elif by == confirm.BY_RETURN:
         top = confirm.with_limits(confirm.winners(summary, values, k), trials)
     else:

@@ -11,6 +11,8 @@ INFEASIBLE_OFFSET = 1e6
 #: What a trial reports beside its iteration's row: the score Tune, ASHA and Optuna rank by, the
 #: constraint value Optuna's TPE reads (episode cost − limit, ≤ 0 feasible), the trial's wall time.
 OBJECTIVE, CONSTRAINT, WALL_TIME_S = "objective", "constraint", "wall_time_s"
+#: The objective of the means of a PBT member's last iterations (sweeps/pbt.py ranks members on it).
+OBJECTIVE_WINDOW = "objective_window"
 
 
 def feasible(cost, limit):

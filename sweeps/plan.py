@@ -63,6 +63,8 @@ class Plan:
     #: The env fingerprints its trials run in (id → fingerprint, lac_rllib/tasks/fingerprint.py): a
     #: resume in another environment is refused (sweeps/record.py).
     env_fingerprints: dict = dataclasses.field(default_factory=dict)
+    #: ``searcher: pbt``: its sub-populations' exploit intervals in env steps (sweeps/pbt.py); else None.
+    pbt: tuple | None = None
 
     @property
     def task(self) -> str | None:
@@ -123,7 +125,9 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
                          "tuned_limit")
     tasks, user_tasks = resolve_tasks(sweep, search_dirs, origin)
     seeds = sweep.seed_list()
-    count = sweep.num_samples * len(seeds) if sweep.is_search else spaces.count_trials(sweep, tasks)
+    pbt = sweep.searcher == "pbt"  # a member per seed (sweeps/pbt.py)
+    count = len(seeds) if pbt else sweep.num_samples * len(seeds) if sweep.is_search else spaces.count_trials(
+        sweep, tasks)
     if count > max_trials:
         what = "num_samples × seeds" if sweep.is_search else "tasks × configurations × algorithms × seeds"
         raise ValueError(f"{origin(('num_samples',) if sweep.is_search else ())}: the sweep plans {count:,} trials "
@@ -143,7 +147,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     for t in first:
         check_cpus(t.params.get("num_envs_per_env_runner", 1), cpus, origin(("cpus_per_trial",)))
     # search: each sampled configuration is trained with every seed (sweeps/sweep.py, SeedRepeater)
-    n_trials = len(trials) if trials is not None else sweep.num_samples * len(seeds)
+    n_trials = len(trials) if trials is not None else len(seeds) if pbt else sweep.num_samples * len(seeds)
     concurrency = min(sweep.max_concurrent or max(1, (os.cpu_count() or 1) // cpus), n_trials)
     figures = estimate(trials or first * n_trials, sweep, cpus, concurrency, infra.tracking_uri)
     timesteps = max(t.timesteps for t in first)
@@ -162,6 +166,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
 
         grace, why = grace_period(trials or first, timesteps, sweep.grace_period)
         early = (grace, why, tuple(milestones(grace, timesteps)))
+    population = check_pbt(sweep, first[0], timesteps, origin) if pbt else None
     name = sweep.name
     from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
 
@@ -169,7 +174,7 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
     fps = [fingerprint(t.task, t.params) for t in first]
     env_fingerprints = {fingerprint_id(fp): fp for fp in fps}
     optuna_storage = None
-    if sweep.is_search:
+    if sweep.is_search and not pbt:
         optuna_storage = infra.optuna_storage or default_optuna_storage(infra.tracking_uri, infra.storage)
         check_optuna_study(optuna_storage, name, infra.resume)
     return Plan(
@@ -178,8 +183,26 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         estimated_wall_s=figures.wall_s, estimated_cpu_h=figures.cpu_h,
         trial_seconds=figures.trial_seconds, eval_share=figures.eval_share, calibration=figures.calibration,
         name=name, storage=str(Path(infra.storage.removeprefix("file://")).resolve()), optuna_storage=optuna_storage,
-        user_algos=user_algos(sweep), env_fingerprints=env_fingerprints,
+        user_algos=user_algos(sweep), env_fingerprints=env_fingerprints, pbt=population,
     )
+
+
+def check_pbt(sweep: SweepFile, first: TrialSpec, timesteps: int, origin) -> tuple[int, ...]:
+    """``searcher: pbt`` checked before Ray starts; returns its sub-populations' intervals (env
+    steps, fastest first): each shorter than the budget, at least two members per sub-population,
+    the replay buffer kept in checkpoints (an exploit copies it with the learner)."""
+    spec = sweep.pbt
+    intervals = spec.intervals(timesteps)
+    if max(intervals) >= timesteps:
+        raise ValueError(f"{origin(('pbt', 'interval'))} {max(intervals):,} env steps is not shorter than the budget "
+                         f"({timesteps:,} env steps): no member would ever exploit; accepted: 1..{timesteps - 1:,}")
+    if spec.members < 2 * len(intervals):
+        raise ValueError(f"{origin(('pbt', 'members'))} {spec.members} for {len(intervals)} sub-populations: each "
+                         f"needs two members to rank; accepted: members >= {2 * len(intervals)}")
+    if first.params.get("store_replay_buffer") is False:
+        raise ValueError(f"{origin(('set', 'store_replay_buffer'))} false with searcher pbt: an exploit copies the "
+                         "donor's whole state, its replay buffer included; accepted: store_replay_buffer true")
+    return intervals
 
 
 def with_tuned(trials: list[TrialSpec], sweep: SweepFile, sets: dict, registry: str | None) -> list[TrialSpec]:

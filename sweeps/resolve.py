@@ -97,10 +97,23 @@ def resolve_sweep(args) -> tuple[SweepFile, str, sweep_file.Origin]:
     data.setdefault("score", "train" if data.get("eval_episodes") == 0 else "eval")
     data.setdefault("cpus_per_trial", 1)
     data.setdefault("experiment", "lac-sweeps")
+    if base.searcher == "pbt":  # a member per seed: the population's seeds from the sweep's first on
+        members = (base.pbt or sweep_file.PBTSpec()).members
+        seeds = sweep_file.Seeds.model_validate(data["seeds"]).values()
+        if (base.seeds is not None or args.seeds is not None) and len(seeds) != members:
+            raise ValueError(f"{origin(('seeds',))}: {len(seeds)} seeds with pbt.members {members}: each member is "
+                             f"one seed; accepted: {members} seeds (seeds: {{count: {members}, start: {seeds[0]}}}), "
+                             f"or no seeds (0..{members - 1}; --seed-start S moves them)")
+        if len(seeds) != members:  # the default 3 seeds: the population's from the first
+            data["seeds"] = {"count": members, "start": seeds[0]}
+        data.setdefault("pbt", {})
     if base.is_search:
-        data.setdefault("num_samples", 20)
+        if base.searcher != "pbt":
+            data.setdefault("num_samples", 20)
         if data["search"] == "default" or "default" in data["search"].values():
             data["search"] = _declared_search(data, origin)
+        if base.searcher == "pbt":
+            _changeable_only(data, origin)
     elif "groups" not in data:  # the file's one group (or one configuration), named after the file
         group = sweep_file.safe_name(space)
         data["groups"] = {group: {"grid": data.pop("grid", {})}} if data.get("grid") else {group: {}}
@@ -137,9 +150,22 @@ def _declared_search(data: dict, origin) -> dict:
         raise ValueError(f"{origin(('search',))}: default ranges on a user's env: give each field's distribution "
                          "(its defaults are known once the env is built)") from None
     try:
-        return spaces.declared_search(data["algo"][0], task, data["budget"], data.get("set", {}), search)
+        return spaces.declared_search(data["algo"][0], task, data["budget"], data.get("set", {}), search,
+                                      changeable=data.get("searcher") == "pbt")
     except ValueError as e:
         raise ValueError(f"{origin(('search',))}: {e}") from None
+
+
+def _changeable_only(data: dict, origin) -> None:
+    """PBT changes its searched fields mid-run: each must be one its algorithm declares changeable."""
+    from lac_rllib.algorithms.registry import algo_config
+
+    algo = data["algo"][0]
+    changeable = algo_config(algo).changeable_fields()
+    for name in data["search"]:
+        if name not in changeable:
+            raise ValueError(f"{origin(('search', name))}: {name} is not a field {algo} can change mid-run; accepted "
+                             f"with searcher pbt: {', '.join(changeable) or 'none'}")
 
 
 def parse_set_pairs(pairs: list[str]) -> dict:

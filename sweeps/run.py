@@ -198,8 +198,20 @@ def print_plan(plan: Plan) -> None:
     contiguous = seeds == tuple(range(seeds[0], seeds[-1] + 1))
     seed_text = f"seeds {seeds[0]}..{seeds[-1]}" if contiguous else f"seeds {list(seeds)}"
     what = f"{sweep.num_samples} Optuna {sweep.searcher.upper()} samples x " if sweep.is_search else ""
-    print(f"  trials: {plan.n_trials}  ({what}{len(seeds)} seed(s) per configuration: {seed_text})")
-    if sweep.is_search:  # how many of the samples the searcher steers (sweeps/search.py)
+    if plan.pbt is not None:  # population-based training (sweeps/pbt.py)
+        pbt = sweep.pbt
+        subs = len(plan.pbt)
+        print(f"  trials: {plan.n_trials}  (a population of {pbt.members} members, one seed each: {seed_text}; "
+              f"{pbt.members * plan.timesteps:,} env steps in all)")
+        print(f"  pbt: {'sub-populations exploiting' if subs > 1 else 'members exploit'} every "
+              f"{' / '.join(f'{i:,}' for i in plan.pbt)} env steps"
+              + (f" (x{pbt.growth:g} after each)" if pbt.growth != 1 else "")
+              + (", the best of a slower one migrating to the next faster" if subs > 1 and pbt.migrate else "")
+              + f"; the bottom {pbt.quantile:.0%} copy a top member and perturb {', '.join(sweep.search)}; "
+              f"ranked by the one feasibility rule on their last {pbt.window} iterations")
+    else:
+        print(f"  trials: {plan.n_trials}  ({what}{len(seeds)} seed(s) per configuration: {seed_text})")
+    if sweep.is_search and plan.pbt is None:  # how many of the samples the searcher steers (sweeps/search.py)
         from sweeps.search import configurations_at_once, search_text
 
         at_once = configurations_at_once(plan.concurrency, len(seeds))

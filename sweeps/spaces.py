@@ -98,6 +98,9 @@ class TrialSpec:
     limit: float | None = None
     #: Labelled as a sweep recorded before ``LABELS`` labelled it (its Tune config lacks ``LABELS_KEY``).
     legacy_label: bool = False
+    #: A schedule its changeable fields follow, [[env steps, {field: value}], ...] (a group's
+    #: ``schedule``: a PBT winner's replayed, sweeps/pbt.py); None: its fields fixed.
+    schedule: list | None = None
 
     @property
     def algo(self) -> str:
@@ -265,7 +268,9 @@ def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
                             rung = {**{k: float(v) for k, v in sweep.constraints.items()},
                                     sweep.ladder_constraint: float(limit)}
                             own = {**overrides, "constraints": rung}
-                        trials += [TrialSpec(name, param, value, task, seed, own, limit=limit)
+                        schedule = ([[int(e.at), {k: to_field_value(v) for k, v in e.set.items()}]
+                                     for e in group.schedule] if group.schedule else None)
+                        trials += [TrialSpec(name, param, value, task, seed, own, limit=limit, schedule=schedule)
                                    for seed in sweep.seed_list()]
         if sweep.frontier:
             along = {}
@@ -280,14 +285,15 @@ def expand(sweep, task_ids: list[str]) -> list[TrialSpec]:
     return trials
 
 
-def declared_search(algo: str, task: str, budget, sets: dict, search) -> dict:
+def declared_search(algo: str, task: str, budget, sets: dict, search, changeable: bool = False) -> dict:
     """A search's ``default`` entries as distributions (a sweep file's data): ``search: default`` is
     ``algo``'s whole declared space (lac_rllib/constrained/search_space.py), a field whose value is
     ``default`` that field's declared range; ranges ``around`` a default are placed around the field's
-    value on ``task`` at ``budget`` with ``sets``. Other entries are kept as given."""
-    from lac_rllib.algorithms.registry import search_space
+    value on ``task`` at ``budget`` with ``sets``. Other entries are kept as given. ``changeable``:
+    the fields PBT may change mid-run instead (``CHANGEABLE``, with their ranges)."""
+    from lac_rllib.algorithms.registry import changeable_space, search_space
 
-    declared = search_space(algo)
+    declared = changeable_space(algo) if changeable else search_space(algo)
     if not declared:
         raise ValueError(f"search: default: {algo} declares no search space; accepted: field → a distribution")
     wanted = dict.fromkeys(declared, "default") if search == "default" else dict(search)
@@ -359,6 +365,6 @@ def resolve_trials(trials: list[TrialSpec], budget: str, sets: dict) -> list[Tri
         if t.task not in base:
             base[t.task] = trial_params(t.task, budget, sets)
         params = trial_params(t.task, budget, sets, t.overrides)
-        out.append(dataclasses.replace(t, params=params, default=params == base[t.task],
+        out.append(dataclasses.replace(t, params=params, default=params == base[t.task] and not t.schedule,
                                        timesteps=get_budget(budget).for_task(t.task)))
     return out

@@ -118,6 +118,11 @@ def param_space(plan: Plan, parent_run_id: str) -> dict:
         "user_algos": plan.user_algos, spaces.LABELS_KEY: spaces.LABELS,  # how its trials are labelled
         "tracking": {"uri": plan.tracking_uri, "experiment": plan.experiment, "parent_run_id": parent_run_id},
     }
+    if plan.pbt is not None:  # PBT: a member per seed, its first fields drawn by Tune, then exploited
+        return {**common, "task": plan.tasks[0], "budget": plan.sweep.budget, "sets": plan.sets,
+                "seeds": list(plan.seeds), "overrides": spaces.tune_search_space(plan.sweep.search),
+                "pbt": {"window": plan.sweep.pbt.window},
+                spaces.REPEAT_INDEX: tune.grid_search(list(range(len(plan.seeds))))}
     if plan.trials is None:  # search: Optuna samples the fields; the trial resolves them (spaces.trial_spec)
         return {**common, "task": plan.tasks[0], "budget": plan.sweep.budget, "sets": plan.sets,
                 "seeds": list(plan.seeds), "overrides": spaces.tune_search_space(plan.sweep.search)}
@@ -216,6 +221,8 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
               f"as KILLED); resume with --resume", file=sys.stderr, flush=True)
         return 130
     stopped = close_open_children(tracker, parent, "FINISHED", tags={STOPPED_TAG: "1"})  # ASHA's early stops
+    if plan.pbt is not None:  # the population's schedules, returns and costs on one figure (sweeps/pbt.py)
+        _log_lineage(tracker, parent, plan)
     seeds = plan.seeds
     seed_text = (f"seeds {seeds[0]}..{seeds[-1]}" if seeds == tuple(range(seeds[0], seeds[-1] + 1))
                  else f"seeds {', '.join(map(str, seeds))}")
@@ -225,6 +232,21 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
     print(f"sweep done: {outcome}; MLflow parent run {parent}")
     print_links(links, plan.tracking_uri)
     return 0
+
+
+def _log_lineage(tracker: SweepTracker, parent: str, plan: Plan) -> None:
+    """``pbt_population.png`` on the parent run; a failure is said, not raised (the sweep trained)."""
+    import tempfile
+
+    from sweeps.pbt import lineage_figure
+
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "pbt_population.png")
+            if lineage_figure(tracker.client, parent, path, tuple(plan.sweep.search)):
+                tracker.client.log_artifact(parent, path)
+    except Exception as e:  # noqa: BLE001
+        print(f"pbt: the population's figure failed: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
 
 
 def print_links(links: dict, uri: str | None = None) -> None:
@@ -250,6 +272,8 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
         name=plan.name, storage_path=plan.storage, failure_config=failure, checkpoint_config=ckpt,
         progress_reporter=LiveTable(plan.n_trials, plan.concurrency), verbose=1,
     )
+    if plan.pbt is not None:
+        return _pbt_tuner(plan, trainable, space, failure, run_config)
     search = search_algorithm(plan)
     scheduler, live = None, plan.concurrency
     if plan.early_stopping:  # a configuration's seeds decided together (sweeps/scheduler.py)
@@ -266,6 +290,45 @@ def _tuner(plan: Plan, parent: str, sweep_dir: Path) -> tune.Tuner:
                                     trial_name_creator=_trial_name),
         run_config=run_config,
     )
+
+
+def _pbt_tuner(plan: Plan, trainable, space: dict, failure, run_config) -> tune.Tuner:
+    """``searcher: pbt``: the population as one grid over its members (Tune's random draw of each
+    member's first fields, seeded), under :class:`sweeps.pbt.ConstrainedPBT`. Members checkpoint
+    where they pause, at each exploit time (synchronous PBT pauses every member there), and every
+    checkpoint is kept: a donor that trains on before its copy starts must not delete what it copies
+    (Tune warns of this with ``num_to_keep`` <= 2)."""
+    from ray.tune.search import BasicVariantGenerator
+
+    from sweeps.objective import OBJECTIVE_WINDOW
+    from sweeps.pbt import ConstrainedPBT
+
+    search, pbt = plan.sweep.search, plan.sweep.pbt
+    scheduler = ConstrainedPBT(time_attr=ENV_STEPS, metric=OBJECTIVE_WINDOW, mode=MODE, intervals=plan.pbt,
+                               mutations=pbt_mutations(search), bounds=pbt_bounds(search),
+                               quantile_fraction=pbt.quantile, resample_probability=pbt.resample_probability,
+                               growth=pbt.growth, migrate=pbt.migrate, seed=plan.infra.optuna_seed)
+    run_config = dataclasses.replace(run_config, checkpoint_config=tune.CheckpointConfig(
+        checkpoint_frequency=0, num_to_keep=None, checkpoint_at_end=True))
+    return tune.Tuner(
+        trainable, param_space=space,
+        tune_config=tune.TuneConfig(num_samples=1, scheduler=scheduler, max_concurrent_trials=plan.concurrency,
+                                    search_alg=BasicVariantGenerator(random_state=plan.infra.optuna_seed),
+                                    trial_name_creator=_trial_name, reuse_actors=False),
+        run_config=run_config,
+    )
+
+
+def pbt_mutations(search: dict) -> dict:
+    """Tune's ``hyperparam_mutations`` of a search: a choice's values (shifted along or resampled),
+    every other range as its Tune domain (scaled ×0.8/×1.2, or resampled)."""
+    return {name: list(d.args) if d.kind == "choice" else spaces.tune_search_space({name: d})[name]
+            for name, d in search.items()}
+
+
+def pbt_bounds(search: dict) -> dict:
+    """Each searched field's (kind, low, high), or ("choice", values): what PBT's explore is clipped to."""
+    return {name: (d.kind, *d.args) if d.kind != "choice" else ("choice", tuple(d.args)) for name, d in search.items()}
 
 
 def search_algorithm(plan: Plan) -> SeedRepeater | None:

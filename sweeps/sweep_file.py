@@ -348,6 +348,16 @@ class Frontier(BaseModel):
         return v
 
 
+class ScheduleStep(BaseModel):
+    """One change of a schedule: from env step ``at`` on, the fields in ``set``."""
+
+    model_config = _schema_config()
+    at: Int(0, MAX_BUDGET)
+    """Env steps from which it applies (the first iteration that starts at or after them)."""
+    set: dict[str, Any] = Field(min_length=1)
+    """The changeable fields it sets (each algorithm's: docs/config.md "Search spaces")."""
+
+
 class Group(BaseModel):
     """Named configurations: every combination of ``grid``'s values, each with ``set`` on top."""
 
@@ -356,8 +366,48 @@ class Group(BaseModel):
     """field → values: one configuration per combination (none: one configuration, ``set`` alone)."""
     set: dict[str, Any] = {}
     """Fields this group's configurations set (the sweep's ``set`` below them, ``grid`` above)."""
+    schedule: tuple[ScheduleStep, ...] | None = Field(None, min_length=1, max_length=MAX_VALUES)
+    """A schedule its changeable fields follow during training, ascending in ``at`` (a PBT winner's,
+    replayed: sweeps/pbt.py); each change rebuilds the run with the new fields and its own state."""
 
     _lists = field_validator("grid")(classmethod(lambda cls, v: _grid_lists(v)))
+
+    @field_validator("schedule")
+    @classmethod
+    def _ascending(cls, v):
+        if v is not None and any(b.at <= a.at for a, b in zip(v, v[1:])):
+            raise ValueError(f"at {[e.at for e in v]}: accepted: strictly ascending env steps")
+        return v
+
+
+class PBTSpec(BaseModel):
+    """Population-based training (``searcher: pbt``, sweeps/pbt.py): ``members`` runs of the
+    algorithm, one seed each, exploiting within their sub-population at its ``interval``, ranked by
+    the one feasibility rule on their last ``window`` iterations."""
+
+    model_config = _schema_config()
+    members: Int(2, 1_000) = 8
+    """The population's size (each member its own seed, from the sweep's first seed on)."""
+    interval: Int(1, MAX_BUDGET) | tuple[Int(1, MAX_BUDGET), ...] | None = None
+    """Env steps between exploits: one number, or one per sub-population (MF-PBT: the members split
+    round-robin, the best of a slower one migrating into the next faster one); default an eighth of
+    the budget. Each shorter than the budget."""
+    growth: Annotated[float, Field(strict=True, ge=1.0, le=10.0)] = 1.0
+    """Each exploit multiplies its sub-population's interval by this (IPBT grows it); 1: fixed."""
+    quantile: Annotated[float, Field(strict=True, gt=0.0, le=0.5)] = 0.25
+    """The bottom fraction of a sub-population that copies a member of its top fraction (Tune's)."""
+    window: Int(1, 1_000) = 5
+    """Iterations whose means rank a member (its return and each constraint's cost)."""
+    resample_probability: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.25
+    """The chance an exploited field is drawn again from its range instead of scaled ×0.8 or ×1.2."""
+    migrate: bool = True
+    """With several intervals: the best of a slower sub-population migrates into the next faster."""
+
+    def intervals(self, budget: int) -> tuple[int, ...]:
+        """The sub-populations' intervals, fastest first (default: an eighth of ``budget``)."""
+        if self.interval is None:
+            return (max(1, budget // 8),)
+        return tuple(sorted(self.interval)) if isinstance(self.interval, tuple) else (self.interval,)
 
 
 class GroupsAt(BaseModel):
@@ -441,18 +491,22 @@ class SweepFile(BaseModel):
     """Named groups of configurations, the sweep runs all of them (e.g. Table 3's NI, VT, PR)."""
     groups_at: tuple[GroupsAt, ...] = ()
     """Groups used instead of ``groups`` at a budget and task preset (the first match wins)."""
-    search: Literal["default"] | dict[str, Distribution | Literal["default"]] | None = None
+    search: Literal["default", "pbt"] | dict[str, Distribution | Literal["default"]] | None = None
     """field → distribution, sampled ``num_samples`` times by ``searcher``; ``default``: the algorithm's
     declared search space (its important fields with ranges and sources, docs/config.md "Search
     spaces"), or, as one field's value, that field's declared range (a narrower search: name only
-    some of its fields, or give some a range of your own)."""
-    searcher: Literal["grid", "random", "tpe", "motpe", "nsga2"] | None = None
+    some of its fields, or give some a range of your own); ``pbt``: ``default`` searched by
+    population-based training (``searcher: pbt``)."""
+    searcher: Literal["grid", "random", "tpe", "motpe", "nsga2", "pbt"] | None = None
     """``grid`` (``grid``/``groups``; the default without ``search``), ``random`` (Optuna's random
     sampler), ``tpe`` (Optuna's TPE on one objective with the feasibility constraint; the default with
     ``search``), or a multi-objective search on return and cost with the constraint, whose result is
     the Pareto set: ``motpe`` (Optuna's TPE on two objectives) or ``nsga2`` (NSGA-II). TPE's random
     start (NSGA-II's random first generation) is half the samples, at most Optuna's default (10; 50):
-    the plan says how many draws each steers."""
+    the plan says how many draws each steers. ``pbt``: population-based training over the search's
+    changeable fields (``pbt``)."""
+    pbt: PBTSpec | None = None
+    """With ``searcher: pbt``: the population, its exploit intervals and ranking window (:class:`PBTSpec`)."""
     num_samples: Int(1, MAX_SAMPLES) | None = None
     """Configurations a search samples (each trained with every seed); default 20."""
     scheduler: Literal["none", "asha"] | None = None
@@ -514,6 +568,17 @@ class SweepFile(BaseModel):
     """What every trial is ranked on (sweeps/score.py): ``eval``, the evaluation block's deterministic
     episodes (default; ``train`` when ``eval_episodes`` is 0), or ``train``, the mean over its final
     10% of training iterations; the other is kept beside it in trials.csv and summary.csv."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _pbt_form(cls, data):
+        # ``search: pbt`` is the algorithm's declared (changeable) space searched by PBT.
+        if isinstance(data, dict) and data.get("search") == "pbt":
+            if data.get("searcher") not in (None, "pbt"):
+                raise KeyedError(("searcher",), f"searcher {data['searcher']} with search: pbt; accepted: "
+                                 "searcher pbt (or none)")
+            data = {**data, "search": "default", "searcher": "pbt"}
+        return data
 
     @field_validator("task", mode="before")
     @classmethod
@@ -592,6 +657,19 @@ class SweepFile(BaseModel):
                              "(a ladder of one limit: cost_limits: [b])")
         if self.search == {}:
             raise KeyedError(("search",), "an empty search; accepted: default, or field → a distribution")
+        if self.pbt is not None and self.searcher != "pbt":
+            raise KeyedError(("pbt",), f"pbt with searcher {self.searcher or 'unset'}: it configures population-based "
+                             "training; accepted: with searcher: pbt (or search: pbt)")
+        if self.searcher == "pbt":
+            if self.search is None:
+                what = "grid" if self.grid is not None else "groups" if self.groups is not None else None
+                raise KeyedError((what or "searcher",), f"searcher pbt {'with ' + what if what else 'without a search'}"
+                                 ": PBT perturbs fields within search ranges; accepted: search: default (the "
+                                 "algorithm's changeable fields) or field → a distribution")
+            for key in ("scheduler", "num_samples"):
+                if getattr(self, key) not in (None, "none"):
+                    raise KeyedError((key,), f"{key} with searcher pbt: the population is pbt.members, ranked and "
+                                     "exploited by PBT itself; accepted: pbt: {members: N}, no " + key)
         if self.tune is not None:
             for key in ("search", "cost_limits", "frontier", "preset", "scheduler"):
                 if getattr(self, key) not in (None, "none"):
@@ -846,6 +924,10 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
             raise FieldError((*prefix, ALGO_FIELD), f"algo is swept here and the sweep's algo is a list "
                                                     f"{list(sweep.algo)}; give one of them")
         _check_set(group.set, algos, _set_loc(where))
+        for i, step in enumerate(group.schedule or ()):
+            loc = (*where, "schedule", i, "set")
+            _check_set(step.set, algos, loc)
+            _check_changeable(step.set, algos, loc)
         for name, values in group.grid.items():
             if name != ALGO_FIELD:
                 for i, value in enumerate(values):
@@ -900,6 +982,18 @@ def _algos_of(top: tuple, sets: dict, grid: dict, loc: tuple, search_dirs: tuple
     return algos
 
 
+def _check_changeable(sets: dict, algos: tuple, loc: tuple) -> None:
+    """A schedule's fields change mid-run: each must be one its algorithm declares changeable."""
+    from lac_rllib.algorithms.registry import algo_config
+
+    for algo in algos:
+        changeable = algo_config(algo).changeable_fields()
+        for name in sets:
+            if name not in changeable:
+                raise FieldError((*loc, name), f"{name} is not a field {algo} can change mid-run; accepted in a "
+                                 f"schedule: {', '.join(changeable) or 'none'}")
+
+
 def _check_set(sets: dict, algos: tuple, loc: tuple) -> None:
     from lac_rllib.algorithms.registry import ALGO_FIELD
 
@@ -937,7 +1031,7 @@ def reference_markdown() -> str:
     """docs/sweeps.md's "Sweep file reference": every key of every part of the schema, from its
     docstring (test_docs keeps the file in sync: ``python -m sweeps.sweep_file``)."""
     lines = []
-    for model in (SweepFile, Group, GroupsAt, Seeds, Distribution, UserEnv, Frontier, TuneSpec):
+    for model in (SweepFile, Group, ScheduleStep, GroupsAt, Seeds, Distribution, UserEnv, Frontier, TuneSpec, PBTSpec):
         lines += [f"#### `{model.__name__}`", "", " ".join((model.__doc__ or "").split()), "",
                   "| key | type | default | what it is |", "|---|---|---|---|"]
         for name, f in model.model_fields.items():

@@ -21,6 +21,7 @@ from ray import tune
 from ray.tune.result import TIME_TOTAL_S
 
 from lac_rllib.algorithms.registry import add_module_dir, build_config, split_algo
+from lac_rllib.constrained.changeable import reapply_learning_rates
 from lac_rllib.constrained.metrics import (
     COST_LIMIT,
     ENV_STEPS,
@@ -33,7 +34,8 @@ from lac_rllib.tasks.user import FACTORY as USER_FACTORY
 from lac_rllib.tasks.user import register_definition
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
-from sweeps.objective import CONSTRAINT, OBJECTIVE, WALL_TIME_S, objective
+from sweeps.objective import CONSTRAINT, OBJECTIVE, OBJECTIVE_WINDOW, WALL_TIME_S, objective
+from sweeps.pbt import MEMBER_FILE, PARENTS_TAG, SCHEDULE_PREFIX, fields_at, window_row
 from sweeps.score import (
     SCORE_COST,
     SCORE_RETURN,
@@ -118,13 +120,11 @@ class SweepTrial(tune.Trainable):
         self.timesteps = int(spec.timesteps or config["timesteps"])
         # The trial's algorithm and fields as resolved (spaces.trial_params), run on its CPUs (env
         # runners and torch threads: lac_rllib.algorithms.lac.config.use_cpus).
-        cpus = int(config.get("cpus", 1))  # a trial's torch threads are its CPUs, whatever --set says
-        algo, fields = split_algo(spec.params)
-        self.algo_config = build_config(algo, spec.task, spec.seed, {**fields, "torch_threads": cpus},
-                                       timesteps=self.timesteps, cpus=cpus)
-        # Its streams within the seed stride, or a confirmation's could meet them (sweeps/seeds.py).
-        check_streams(self.algo_config.num_env_runners, self.algo_config.num_envs_per_env_runner)
-        self.algo = self.algo_config.build_algo()
+        # A replayed schedule (a PBT winner's, sweeps/pbt.py) starts at its first entry's fields.
+        self.schedule = [(int(at), dict(fields)) for at, fields in (spec.schedule or ())]
+        self.changes = fields_at(self.schedule, 0)
+        self._build()
+        algo = split_algo(spec.params)[0]
         tr = config["tracking"]
         self.tracker = TrialTracker(tr["uri"], tr["experiment"], tr.get("parent_run_id"), self.trial_id,
                                     spec.label())
@@ -159,6 +159,40 @@ class SweepTrial(tune.Trainable):
                                **{f"{RESOLVED_TAG_PREFIX}{k}": v for k, v in self.algo_config.resolved().items()}})
         self.tracker.log_text(json.dumps({**params, COST_LIMIT: self.algo_config.effective_cost_limit},
                                          indent=2, default=str), "config.json")
+        # PBT (config ``pbt``: its window) and a replayed schedule: the member's record, carried in its
+        # checkpoints (MEMBER_FILE): its recent rows, its fields' schedule and its parents.
+        self.window = int((config.get("pbt") or {}).get("window", 0))
+        self.member = {"trial_id": self.trial_id, "trial_name": self.trial_name, "env_steps": 0, "rows": [],
+                       "schedule": [[0, self._changeable()]], "parents": []}
+
+    def _build(self, checkpoint: str | None = None) -> None:
+        """The trial's algorithm: its resolved fields with ``self.changes`` on top (a schedule's, or
+        what an exploit set), on its CPUs; ``checkpoint``: the state restored into it (the learning
+        rates set again from its own fields: lac_rllib/constrained/changeable.py)."""
+        cpus = int(self.config.get("cpus", 1))  # a trial's torch threads are its CPUs, whatever --set says
+        algo, fields = split_algo(self.spec.params)
+        self.algo_config = build_config(algo, self.spec.task, self.spec.seed,
+                                        {**fields, **self.changes, "torch_threads": cpus},
+                                        timesteps=self.timesteps, cpus=cpus)
+        # Its streams within the seed stride, or a confirmation's could meet them (sweeps/seeds.py).
+        check_streams(self.algo_config.num_env_runners, self.algo_config.num_envs_per_env_runner)
+        self.algo = self.algo_config.build_algo()
+        if checkpoint is not None:
+            self.algo.restore_from_path(checkpoint)
+            reapply_learning_rates(self.algo)
+
+    def _changeable(self) -> dict:
+        """The values of the fields PBT may change, as this member runs them."""
+        return {f: getattr(self.algo_config, f) for f in type(self.algo_config).changeable_fields()}
+
+    def _switch(self, changes: dict) -> None:
+        """A replayed schedule's change: the algorithm rebuilt with ``changes`` and its own state
+        restored into it, as PBT's exploit rebuilt the member it copied into."""
+        with tempfile.TemporaryDirectory() as tmp:
+            self.algo.save_to_path(tmp)
+            self.algo.stop()
+            self.changes = changes
+            self._build(tmp)
 
     def step(self) -> dict:
         if self.already_finished:
@@ -167,6 +201,9 @@ class SweepTrial(tune.Trainable):
         try:
             if self.iteration + 1 == self.spec.fail_at_iteration:
                 raise RuntimeError(f"injected failure at iteration {self.iteration + 1} (fail_at_iteration)")
+            due = fields_at(self.schedule, self.member["env_steps"])
+            if due != self.changes:  # a replayed schedule's next entry
+                self._switch(due)
             r = self.algo.train()
             metrics = iteration_row(r, self.algo.config.REPORTED_KEYS)
             del metrics[ITERATION]  # Tune counts its own (training_iteration); MLflow's step is env steps
@@ -177,6 +214,15 @@ class SweepTrial(tune.Trainable):
             metrics[OBJECTIVE] = objective(metrics[EPISODE_RETURN], cost, limit)
             metrics[CONSTRAINT] = cost - limit  # ≤ 0 is feasible
             metrics[WALL_TIME_S] = float(r.get(TIME_TOTAL_S, 0.0))
+            self.member["env_steps"] = int(metrics[ENV_STEPS])
+            if self.window or self.schedule:  # the member's fields as it runs them: its schedule's curve
+                metrics.update({f"{SCHEDULE_PREFIX}{k}": float(v) for k, v in self._changeable().items()
+                                if isinstance(v, (int, float))})
+            if self.window:  # PBT ranks on the one rule over the last ``window`` iterations (sweeps/pbt.py)
+                self.member["rows"] = [*self.member["rows"], {k: v for k, v in metrics.items()
+                                                              if isinstance(v, (int, float))}][-self.window:]
+                recent = window_row(self.member["rows"])
+                metrics[OBJECTIVE_WINDOW] = objective(recent[EPISODE_RETURN], *row_cost(recent))
             done = metrics[ENV_STEPS] >= self.timesteps
             if metrics[ENV_STEPS] > self.logged_up_to:
                 # The last step's objective is the trial's score's, logged when the trial finishes.
@@ -246,6 +292,9 @@ class SweepTrial(tune.Trainable):
                                     **behaviour}.items() if math.isfinite(v)}
         if logged:
             self.tracker.log_metrics(logged, step=int(curve[ENV_STEPS].max()))
+        if self.window or self.schedule:  # the member's schedule and parents: what a replay reruns
+            self.tracker.log_text(json.dumps({k: self.member[k] for k in ("schedule", "parents")}, default=float),
+                                  MEMBER_FILE)
         self.tracker.set_tags({CHECKPOINT_TAG: "checkpoint", SCORE_TAG: used,
                                **({LADDER_CONSTRAINT_TAG: self.config["ladder_constraint"]}
                                   if names and self.config.get("ladder_constraint") else {})})
@@ -274,9 +323,33 @@ class SweepTrial(tune.Trainable):
 
     def save_checkpoint(self, checkpoint_dir: str) -> None:
         self.algo.save_to_path(checkpoint_dir)
+        with open(os.path.join(checkpoint_dir, MEMBER_FILE), "w") as f:
+            json.dump(self.member, f, default=float)
 
     def load_checkpoint(self, checkpoint: str) -> None:
-        self.algo.restore_from_path(checkpoint)
+        """Its own checkpoint (a resume, a pause), or on PBT's exploit a donor's: the donor's whole
+        state restored into this member as its (perturbed) fields build it, its learning rates set
+        again (lac_rllib/constrained/changeable.py), the donor's record inherited and the copy
+        recorded as this member's parent (``lac.pbt.parents``)."""
+        path = os.path.join(checkpoint, MEMBER_FILE)
+        saved = json.load(open(path)) if os.path.exists(path) else None
+        due = fields_at(self.schedule, saved["env_steps"]) if saved else self.changes
+        if due != self.changes:  # a replay resumed past a change: built with the fields due there
+            self.algo.stop()
+            self.changes = due
+            self._build(checkpoint)
+        else:
+            self.algo.restore_from_path(checkpoint)
+            reapply_learning_rates(self.algo)
+        if saved is None:
+            return
+        member = {**saved, "trial_id": self.trial_id, "trial_name": self.trial_name}
+        if saved["trial_id"] != self.trial_id:  # an exploit (or a migration): the donor's lineage, then the copy
+            at = int(saved["env_steps"])
+            member["schedule"] = [*saved["schedule"], [at, self._changeable()]]
+            member["parents"] = [*saved["parents"], [at, saved["trial_name"]]]
+            self.tracker.set_tags({PARENTS_TAG: json.dumps(member["parents"])[:4000]})
+        self.member = member
 
     def cleanup(self) -> None:
         self.tracker.flush()

@@ -242,6 +242,11 @@ def search_space(algo: str) -> dict:
     return dict(algo_config(algo).SEARCH_SPACE)
 
 
+def changeable_space(algo: str) -> dict:
+    """The fields PBT may change mid-run in ``algo``, with their ranges (``CHANGEABLE``)."""
+    return algo_config(algo).changeable_space()
+
+
 def speed_fields(algo: str) -> frozenset:
     """``algo``'s fields that change how fast a run goes, not what it learns."""
     return frozenset(algo_config(algo).SPEED_FIELDS)

@@ -109,6 +109,12 @@ class SafeTaskConfig:
     #: The fields a search tunes by default (``search: default``, a tuned comparison's ``tune:``):
     #: field → its range, scale and source (lac_rllib/constrained/search_space.py).
     SEARCH_SPACE: dict = {}
+    #: The fields population-based training may change mid-run (sweeps/pbt.py), each with its range
+    #: (lac_rllib/constrained/search_space.py): an exploit rebuilds the member with the new values
+    #: and restores the donor's state into it, so a field qualifies when nothing in that state fixes
+    #: it (an optimizer's state carries the donor's lr: lac_rllib/constrained/changeable.py sets it
+    #: again). None: the fields of ``SEARCH_SPACE``.
+    CHANGEABLE: dict | None = None
     #: The fields a sweep's named budget sets (sweeps/spaces.py BUDGETS): budget → task preset (or
     #: ``"*"``: any other) → field values; none: the preset's own values.
     BUDGET_FIELDS: dict[str, dict[str, dict[str, Any]]] = {}
@@ -135,6 +141,15 @@ class SafeTaskConfig:
         super().__init_subclass__(**kwargs)
         if "ALGO" not in vars(cls):  # a user's config: named by where it lives
             cls.ALGO = cls.__module__
+
+    @classmethod
+    def changeable_space(cls) -> dict:
+        """The fields PBT may change mid-run with their ranges (``CHANGEABLE``)."""
+        return dict(cls.SEARCH_SPACE if cls.CHANGEABLE is None else cls.CHANGEABLE)
+
+    @classmethod
+    def changeable_fields(cls) -> tuple[str, ...]:
+        return tuple(cls.changeable_space())
 
     @classmethod
     def benchmark_fields(cls, benchmark: str, steps: int) -> dict[str, Any]:

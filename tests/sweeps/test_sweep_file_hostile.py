@@ -94,7 +94,7 @@ CASES = [
     ("grid and search", "grid: {beta: [1.0]}\nsearch: {nu_lr: {loguniform: [1e-3, 1e-1]}}\n", 2,
      r"search: give search or grid/groups, not both"),
     ("unknown searcher", "search: {beta: {uniform: [0, 1]}}\nsearcher: tpee\n", 2,
-     r"searcher: Input should be 'grid', 'random', 'tpe', 'motpe' or 'nsga2' \(got 'tpee'\)"),
+     r"searcher: Input should be 'grid', 'random', 'tpe', 'motpe', 'nsga2' or 'pbt' \(got 'tpee'\)"),
     ("10⁸ trials", "grid:\n" + "".join(f"  {f}: [{', '.join(str(0.01 * (i + 1)) for i in range(100))}]\n"
                                        for f in ("nu_lr", "beta", "critic_lr", "actor_lr")), None,
      r"the sweep plans 300,000,000 trials \(tasks × configurations × algorithms × seeds\), more than --max-trials "

@@ -36,7 +36,7 @@ from lac_rllib.constrained.lagrange import FixedMultiplierParams
 from lac_rllib.constrained.networks import ACTIVATIONS
 from lac_rllib.constrained.precision import DTYPE_CHOICES as LANGEVIN_DTYPES
 from lac_rllib.constrained.precision import resolve_dtype
-from lac_rllib.constrained.search_space import Searched
+from lac_rllib.constrained.search_space import MULTIPLIER_LR, Searched, lr
 from lac_rllib.constrained.task_config import SafeTaskParams
 from lac_rllib.families.off_policy.config import OffPolicyConfig
 
@@ -260,6 +260,14 @@ class LACConfig(OffPolicyConfig, AlgorithmConfig):
                                               "not vary it): a decade either side", around=10.0),
         "beta": Searched("choice", "[P] Table 3's PR runs β in {0, 1, 5, 10, 20} (the actor's KL weight; "
                                    "Appendix D.1, Figure 6)", (0.0, 1.0, 5.0, 10.0, 20.0)),
+    }
+    #: PBT changes the four and the rates mid-run (sweeps/pbt.py): the Adam rates a decade either side
+    #: of the task's default, as every algorithm's, and ν's step α_ν as every multiplier's rate.
+    CHANGEABLE = {
+        **SEARCH_SPACE,
+        "actor_lr": lr("[P] Tables 4-5: one Adam rate per task family; a decade either side"),
+        "critic_lr": lr("[P] Tables 4-5: one Adam rate per task family; a decade either side"),
+        "nu_lr": lr(MULTIPLIER_LR),
     }
     #: What ``lac-eval --actions`` accepts for a LAC policy: the generator's mean, a draw from it,
     #: or Algorithm 1's chain.
