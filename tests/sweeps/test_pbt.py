@@ -389,3 +389,120 @@ def test_a_groups_schedule_changes_its_fields_at_their_env_steps(ray_session, tm
     assert _history(client, run, "schedule/lr") == [(500, 0.001), (1000, 0.001), (1500, 0.003), (2000, 0.003)]
     assert [v for _, v in _history(client, run, "schedule/clip_param")] == [0.2, 0.2, 0.1, 0.1]
     assert [s for s, _ in _history(client, run, "env_steps")] == [500, 1000, 1500, 2000]
+
+
+# ----------------------------------------------------------------------------- sub-populations
+
+class _Member:
+    """What Tune's PBT reads and writes of a trial."""
+
+    def __init__(self, index):
+        from types import SimpleNamespace
+
+        self.trial_id, self.experiment_tag, self.status = f"m{index}", f"m{index}", "PAUSED"
+        self.config = {"__trial_index__": index, "overrides": {"lr": 1e-3}}
+        self.checkpoint, self.last_result = f"own-{index}", {}
+        self.temporary_state = SimpleNamespace(saving_to=None)
+        self.run_metadata = SimpleNamespace(checkpoint_manager=SimpleNamespace(_latest_checkpoint_result=None))
+
+    def is_finished(self):
+        return self.status == "TERMINATED"
+
+    def set_experiment_tag(self, tag):
+        self.experiment_tag = tag
+
+    def set_config(self, config):
+        self.config = config
+
+    @property
+    def copied_from(self):
+        result = self.run_metadata.checkpoint_manager._latest_checkpoint_result
+        return None if result is None else result.checkpoint
+
+
+class _Controller:
+    def __init__(self, members):
+        self.members, self.saves = members, 0
+
+    def get_trials(self):
+        return list(self.members)
+
+    def get_live_trials(self):
+        return [m for m in self.members if m.status != "TERMINATED"]
+
+    def pause_trial(self, trial, should_checkpoint=True):
+        trial.status = "PAUSED"
+
+    def _schedule_trial_save(self, trial, result=None):
+        return f"at-sync-{trial.trial_id}"
+
+    def checkpoint(self, force=False, wait=False):
+        self.saves += 1
+
+
+def _report(scheduler, controller, member, t, score):
+    for m in controller.members:
+        if m.status == "RUNNING":
+            m.status = "PAUSED"
+    member.status = "RUNNING"
+    return scheduler.on_trial_result(controller, member, {"env_steps": t, OBJECTIVE_WINDOW: score})
+
+
+def test_sub_populations_exploit_within_themselves_at_their_intervals_and_the_slow_best_migrates():
+    from sweeps.sweep import pbt_bounds, pbt_mutations
+    from sweeps.sweep_file import Distribution
+
+    search = {"lr": Distribution(loguniform=[1e-4, 1e-2])}
+    scheduler = ConstrainedPBT(time_attr="env_steps", metric=OBJECTIVE_WINDOW, mode="max", intervals=(100, 200),
+                               mutations=pbt_mutations(search), bounds=pbt_bounds(search), seed=0,
+                               quantile_fraction=0.25)
+    members = [_Member(i) for i in range(6)]  # fast: 0, 2, 4; slow: 1, 3, 5
+    controller = _Controller(members)
+    from ray.tune.schedulers.pbt import _PBTTrialState
+
+    for m in members:
+        scheduler._trial_state[m] = _PBTTrialState(m)
+    score = {0: 5.0, 2: 1.0, 4: 3.0, 1: 50.0, 3: -1e6, 5: 10.0}  # member 1 (slow) is the best of all
+    for i in (0, 2, 4, 1, 3, 5):
+        _report(scheduler, controller, members[i], 100, score[i])
+    # The fast sub-population exploited at 100: its worst (2) copied its best (0); the slow one did not.
+    assert members[2].copied_from == "at-sync-m0" or members[2].copied_from == "own-0"
+    assert all(members[i].copied_from is None for i in (0, 4, 1, 3, 5))
+    assert scheduler.exploits == [1, 0] and controller.saves == 1
+    assert scheduler.next_sync == [200.0, 200.0]
+    for i in (0, 2, 4, 1, 3, 5):
+        _report(scheduler, controller, members[i], 200, score[i])
+    # At 200 both exploited: the slow one's worst (3) copied its best (1), and 1 migrated into the
+    # fast one's worst, which ranks below it.
+    assert members[3].copied_from in ("at-sync-m1", "own-1")
+    assert scheduler.exploits == [2, 1] and scheduler.migrations == 1
+    fast_copies = [members[i].copied_from for i in (0, 2, 4)]
+    assert any(c in ("at-sync-m1", "own-1") for c in fast_copies)
+
+
+def test_a_resumed_population_waiting_past_its_next_exploit_moves_it_on():
+    scheduler = _scheduler(intervals=(100,))
+    members = [_Member(i) for i in range(2)]
+    controller = _Controller(members)
+    from ray.tune.schedulers.pbt import _PBTTrialState
+
+    for m in members:  # a resume: the scheduler's state is new, the members come back at 300 env steps
+        scheduler._trial_state[m] = _PBTTrialState(m)
+        scheduler._trial_state[m].last_train_time = 300
+    assert scheduler.choose_trial_to_run(controller) in members
+    assert scheduler.next_sync == [400.0]
+
+
+def test_an_interval_grows_after_each_exploit():
+    scheduler = ConstrainedPBT(time_attr="env_steps", metric=OBJECTIVE_WINDOW, mode="max", intervals=(100,),
+                               mutations={"lr": [1e-3]}, bounds={}, seed=0, growth=2.0)
+    members = [_Member(i) for i in range(2)]
+    controller = _Controller(members)
+    from ray.tune.schedulers.pbt import _PBTTrialState
+
+    for m in members:
+        scheduler._trial_state[m] = _PBTTrialState(m)
+    for t in (100, 300):
+        for i, m in enumerate(members):
+            _report(scheduler, controller, m, t, float(i))
+    assert scheduler.exploits == [2] and scheduler.intervals == [400.0] and scheduler.next_sync == [700.0]
