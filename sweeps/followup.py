@@ -96,12 +96,12 @@ def confirm_top(plan) -> tuple[SweepFile, list[dict]] | None:
     if not len(trials):
         top = []
     elif plan.sweep.searcher == "pbt":  # a member's schedule, not a point (sweeps/pbt.py)
-        from sweeps.pbt import winners
+        from sweeps.pbt import winners, with_schedules
         from sweeps.record import parent_run_id
         from sweeps.tracking import SweepTracker
 
-        top = winners(trials, k, SweepTracker(plan.tracking_uri, plan.experiment).client,
-                      parent_run_id(Path(plan.storage) / plan.name))
+        client = SweepTracker(plan.tracking_uri, plan.experiment).client
+        top = winners(with_schedules(trials, client, parent_run_id(Path(plan.storage) / plan.name)), k)
     elif by == confirm.BY_RETURN:
         top = confirm.with_limits(confirm.winners(summary, values, k), trials)
     else:

@@ -227,29 +227,57 @@ class _SubPopulation:
         return getattr(self._controller, name)
 
 
-def winners(trials, k: int, client, parent_run_id: str) -> list[dict]:
-    """A finished PBT sweep's ``k`` best members by the one feasibility rule on their scores (feasible
-    members by return; none infeasible), each with the schedule it followed (its ``member.json``:
-    its ancestors' fields up to each copy, then its own): what a confirmation replays on fresh seeds
-    as a fixed schedule (a group's ``schedule``, sweeps/trainable.py)."""
+#: The column of a PBT sweep's trials read back with each member's schedule (JSON of member.json's).
+SCHEDULE_COLUMN = "schedule"
+
+
+def with_schedules(trials, client, parent_run_id: str):
+    """A PBT sweep's ``trials`` (sweeps/reports/results.py) with each member's schedule (its
+    ``member.json``: its ancestors' fields up to each copy, then its own) as JSON in
+    :data:`SCHEDULE_COLUMN`: the data its winners are chosen from (committed with a tuned comparison's)."""
+    import json
+
+    from sweeps.tracking import PARENT_TAG, TRIAL_TAG
+
+    exp = client.get_run(parent_run_id).info.experiment_id
+    schedules = []
+    for trial_id in trials["trial_id"]:
+        found = client.search_runs([exp], max_results=1, filter_string=f"tags.`{TRIAL_TAG}` = '{trial_id}' and "
+                                                                       f"tags.`{PARENT_TAG}` = '{parent_run_id}'")
+        try:
+            with open(client.download_artifacts(found[0].info.run_id, MEMBER_FILE)) as f:
+                schedules.append(json.dumps(json.load(f)["schedule"]))
+        except (IndexError, OSError, KeyError, ValueError):  # a member that never finished: no schedule
+            schedules.append(None)
+    return trials.assign(**{SCHEDULE_COLUMN: schedules})
+
+
+def winners(trials, k: int, least_costly_fallback: bool = False) -> list[dict]:
+    """A finished PBT sweep's ``k`` best members by the one feasibility rule on their scores
+    (feasible members by return), each with the schedule it followed (``trials`` read back
+    :func:`with_schedules`): what a confirmation replays on fresh seeds as a fixed schedule (a
+    group's ``schedule``, sweeps/trainable.py). With ``least_costly_fallback`` and no feasible
+    member, the least costly one, ``feasible`` False (a tuned comparison confirms every algorithm)."""
     import json
 
     from sweeps.objective import feasible
-    from sweeps.tracking import PARENT_TAG, TRIAL_TAG
 
-    done = trials[[bool(feasible(c, b)) for c, b in zip(trials["episode_cost"], trials["cost_limit"])]]
+    rows = trials[trials[SCHEDULE_COLUMN].notna()] if SCHEDULE_COLUMN in trials else trials.iloc[:0]
+    ok = [bool(feasible(c, b)) for c, b in zip(rows["episode_cost"], rows["cost_limit"])]
+    chosen = rows[ok].sort_values("episode_return", ascending=False).head(k)
+    if not len(chosen) and least_costly_fallback and len(rows):
+        chosen = rows.assign(_excess=rows["episode_cost"] - rows["cost_limit"]).sort_values("_excess").head(1)
     out = []
-    for r in done.sort_values("episode_return", ascending=False).head(k).to_dict("records"):
-        run, = client.search_runs([client.get_run(parent_run_id).info.experiment_id], max_results=1,
-                                  filter_string=f"tags.`{TRIAL_TAG}` = '{r['trial_id']}' and "
-                                                f"tags.`{PARENT_TAG}` = '{parent_run_id}'")
-        with open(client.download_artifacts(run.info.run_id, MEMBER_FILE)) as f:
-            member = json.load(f)
+    for r in chosen.to_dict("records"):
+        schedule = json.loads(r[SCHEDULE_COLUMN])
         out.append({"group": f"pbt{len(out) + 1}", "config": r["config"], "fields": {},
-                    "schedule": [{"at": int(at), "set": fields} for at, fields in member["schedule"]],
-                    "parents": member["parents"],
+                    "name": f"{r['config']}-s{r['seed']}'s schedule",
+                    "schedule": [{"at": int(at), "set": fields} for at, fields in schedule],
+                    "feasible": bool(feasible(r["episode_cost"], r["cost_limit"])),
                     "search": {"return_mean": float(r["episode_return"]), "return_mean_ci_low": None,
-                               "return_mean_ci_high": None, "cost_mean": float(r["episode_cost"]), "n_seeds": 1}})
+                               "return_mean_ci_high": None, "cost_mean": float(r["episode_cost"]),
+                               "feasible_fraction": float(feasible(r["episode_cost"], r["cost_limit"])),
+                               "n_seeds": 1}})
     return out
 
 

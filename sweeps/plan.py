@@ -218,7 +218,7 @@ def with_tuned(trials: list[TrialSpec], sweep: SweepFile, sets: dict, registry: 
     from lac_rllib.algorithms.registry import ALGO_FIELD
     from lac_rllib.tasks import get_task
     from lac_rllib.tasks.fingerprint import fingerprint
-    from sweeps.tuned_registry import DEFAULT_REGISTRY, DEFAULT_STANDS, applied, tuned_entry
+    from sweeps.tuned_registry import DEFAULT_REGISTRY, DEFAULT_STANDS, applied, applied_schedule, tuned_entry
 
     registry = Path(registry or DEFAULT_REGISTRY)
     cache, said, out = {}, set(), []
@@ -241,13 +241,17 @@ def with_tuned(trials: list[TrialSpec], sweep: SweepFile, sets: dict, registry: 
             wanted = own["constraints"] if own.get("constraints") else float(limit)
             path, entry = tuned_entry(registry, t.task, algo, sweep.budget, wanted, environment,
                                       dataclasses.replace(t, params=own).config_label(), sweep.tuned_limit)
-            cache[key] = {k: v for k, v in applied(entry).items() if k not in t.overrides and k not in sets}
+            cache[key] = ({k: v for k, v in applied(entry).items() if k not in t.overrides and k not in sets},
+                          applied_schedule(entry))
             if entry.verdict == DEFAULT_STANDS and path not in said:
                 said.add(path)
                 print(f"preset: tuned: {path}: tuning {algo} on {t.task} at budget {entry.budget}, limit "
                       f"{entry.cost_limit:g} did not beat its default on fresh seeds (verdict {DEFAULT_STANDS}): "
                       "its trials run the default", flush=True)
-        out.append(dataclasses.replace(t, overrides={**cache[key], **t.overrides}))
+        fields, schedule = cache[key]  # a PBT winner's schedule replayed, the trial's own fields above it
+        own = {**sets, **t.overrides}
+        out.append(dataclasses.replace(t, overrides={**fields, **t.overrides}, schedule=t.schedule or (
+            schedule and [[at, {k: v for k, v in f.items() if k not in own}] for at, f in schedule])))
     return out
 
 

@@ -432,9 +432,13 @@ class TuneSpec(BaseModel):
     ``confirm_seeds`` fresh seeds, every algorithm in the same confirmation."""
 
     model_config = _schema_config()
-    searcher: Literal["random", "tpe"] = "tpe"
-    """Optuna's sampler for every algorithm: ``tpe`` (with the feasibility constraint; its first
-    half of the samples, at most 10, are its random start) or ``random``."""
+    searcher: Literal["random", "tpe", "pbt"] = "tpe"
+    """How every algorithm is searched: Optuna's ``tpe`` (with the feasibility constraint; its first
+    half of the samples, at most 10, are its random start) or ``random``, or population-based
+    training, ``pbt`` (each algorithm's population of ``pbt.members`` over its changeable fields; its
+    winner's schedule confirmed and registered)."""
+    pbt: PBTSpec | None = None
+    """With ``searcher: pbt``: every algorithm's population (:class:`PBTSpec`; default 8 members)."""
     num_samples: Int(1, MAX_SAMPLES) = 8
     """Configurations each algorithm's search samples (with ``tpe`` at least 2: one steered by TPE)."""
     seeds: Seeds = Seeds(count=3)
@@ -448,6 +452,16 @@ class TuneSpec(BaseModel):
 
     @model_validator(mode="after")
     def _steered(self):
+        if self.pbt is not None and self.searcher != "pbt":
+            raise KeyedError(("pbt",), f"pbt with searcher {self.searcher}; accepted: with searcher: pbt")
+        if self.searcher == "pbt":
+            for key in ("num_samples", "seeds"):  # (a resolved file dumps the defaults: those pass)
+                if getattr(self, key) != type(self).model_fields[key].default:
+                    raise KeyedError((key,), f"{key} with searcher pbt: a population of pbt.members runs, one seed "
+                                     "each; accepted: pbt: {members: N}")
+            if self.pbt is None:
+                object.__setattr__(self, "pbt", PBTSpec())
+            return self
         # A "tuned" comparison whose every draw is TPE's random start is random search (sweeps/search.py).
         if self.searcher == "tpe" and steered(self.searcher, self.num_samples) == 0:
             start = random_start(self.searcher, self.num_samples)
@@ -927,7 +941,7 @@ def check_fields(sweep: SweepFile, search_dirs: tuple[str, ...] = ()) -> None:
         for i, step in enumerate(group.schedule or ()):
             loc = (*where, "schedule", i, "set")
             _check_set(step.set, algos, loc)
-            _check_changeable(step.set, algos, loc)
+            check_changeable(step.set, algos, loc)
         for name, values in group.grid.items():
             if name != ALGO_FIELD:
                 for i, value in enumerate(values):
@@ -982,7 +996,7 @@ def _algos_of(top: tuple, sets: dict, grid: dict, loc: tuple, search_dirs: tuple
     return algos
 
 
-def _check_changeable(sets: dict, algos: tuple, loc: tuple) -> None:
+def check_changeable(sets: dict, algos: tuple, loc: tuple) -> None:
     """A schedule's fields change mid-run: each must be one its algorithm declares changeable."""
     from lac_rllib.algorithms.registry import algo_config
 

@@ -86,17 +86,21 @@ def search_sweep(sweep: SweepFile, algo: str, task: str) -> SweepFile:
     data = sweep.model_dump(exclude_none=True, exclude={"tune", "groups", "grid", "groups_at", "algo", "name", "seeds",
                                                          "searcher", "num_samples", "description", "set"})
     t = sweep.tune
-    search = spaces.declared_search(algo, task, sweep.budget, sets, "default")
+    pbt = t.searcher == "pbt"  # a population over the changeable fields, a member per seed
+    search = spaces.declared_search(algo, task, sweep.budget, sets, "default", changeable=pbt)
+    how = ({"pbt": t.pbt.model_dump(exclude_none=True), "seeds": {"count": t.pbt.members, "start": 0}} if pbt else
+           {"num_samples": t.num_samples, "seeds": t.seeds.model_dump(exclude_none=True)})
     out = SweepFile.model_validate({**data, "algo": [algo], "set": sets, "search": search, "searcher": t.searcher,
-                                    "num_samples": t.num_samples, "seeds": t.seeds.model_dump(exclude_none=True),
-                                    "task": [task], "name": f"{sweep.name}-{TUNE}-{algo}",
+                                    **how, "task": [task], "name": f"{sweep.name}-{TUNE}-{algo}",
                                     "description": f"{sweep.name}: {algo} over its search space"})
     check_fields(out)
     return out
 
 
 def budget_of(plan: Plan) -> tuple[int, int, int]:
-    """A search's budget: (configurations, seeds each, env steps per trial)."""
+    """A search's budget: (configurations, seeds each, env steps per trial); a population's: (members, 1, env steps)."""
+    if plan.pbt is not None:
+        return plan.sweep.pbt.members, 1, plan.timesteps
     return plan.sweep.num_samples, len(plan.seeds), plan.timesteps
 
 
@@ -153,11 +157,16 @@ def print_tuned_plan(tp: TunedPlan) -> None:
     from sweeps.search import configurations_at_once, search_text
 
     t = tp.sweep.tune
-    how = "TPE with the feasibility constraint" if t.searcher == "tpe" else "random search"
+    how = {"tpe": "TPE with the feasibility constraint", "random": "random search",
+           "pbt": "population-based training ranked by the one feasibility rule"}[t.searcher]
     print(f"tuned comparison '{tp.name}': {', '.join(tp.searches)} on {tp.task}, budget {tp.sweep.budget}, {how}")
     first = next(iter(tp.searches.values()))
-    at_once = configurations_at_once(first.concurrency, len(first.seeds))
-    print(f"  each search: {search_text(t.searcher, t.num_samples, at_once)}")
+    if first.pbt is None:
+        at_once = configurations_at_once(first.concurrency, len(first.seeds))
+        print(f"  each search: {search_text(t.searcher, t.num_samples, at_once)}")
+    else:
+        print(f"  each search: {t.pbt.members} members exploiting every {' / '.join(f'{i:,}' for i in first.pbt)} "
+              "env steps; its best member's schedule is what is confirmed")
     for algo, p in tp.searches.items():
         n, seeds, steps = budget_of(p)
         print(f"  {algo:>10}: {_budget_text((n, seeds, steps))} = {n * seeds * steps:,} env steps, "
@@ -189,8 +198,9 @@ def confirmation_sweep(tp: TunedPlan, winners: dict) -> SweepFile:
     groups = {}
     for algo, tops in winners.items():
         own = dict(tp.searches[algo].sweep.set)  # the sweep's set and its groups' (a table's preset)
-        for k, w in enumerate(tops, 1):
-            groups[f"{algo}-{TUNED}{k}"] = {"set": {**own, "algo": algo, **w["fields"]}}
+        for k, w in enumerate(tops, 1):  # a PBT winner: its schedule replayed (sweeps/pbt.py)
+            groups[f"{algo}-{TUNED}{k}"] = {"set": {**own, "algo": algo, **w["fields"]},
+                                             **({"schedule": w["schedule"]} if w.get("schedule") else {})}
         groups[f"{algo}-{DEFAULT}"] = {"set": {**own, "algo": algo}}
     return followup.build_confirmation(
         tp.sweep, groups, _search_seeds(tp), tp.sweep.tune.confirm_seeds, tp.sweep.budget,
@@ -219,6 +229,10 @@ def search_winners(tp: TunedPlan, algo: str, trials, summary=None) -> list[dict]
 
     if not len(trials):
         return []
+    if tp.sweep.tune.searcher == "pbt":  # members' schedules (read back with them: run_tuned)
+        from sweeps.pbt import winners
+
+        return winners(trials, tp.sweep.tune.top, least_costly_fallback=True)
     fields = tp.searches[algo].sweep.search or ()
     summary = summarize(trials) if summary is None else summary
     return pick_winners(summary, followup.fields_of(trials, fields), tp.sweep.tune.top)
@@ -260,6 +274,12 @@ def run_tuned(tp: TunedPlan, run_plan) -> int:
             if rc != 0:
                 return rc
         searched[algo], summary = followup.read_back(plan, plan.sweep.search or ())
+        if plan.pbt is not None:  # each member's schedule beside its row: what its winner replays
+            from sweeps.pbt import with_schedules
+            from sweeps.record import parent_run_id
+
+            searched[algo] = with_schedules(searched[algo], SweepTracker(plan.tracking_uri, plan.experiment).client,
+                                            parent_run_id(sweep_dir))
         winners[algo] = search_winners(tp, algo, searched[algo], summary)
         if not winners[algo]:
             print(f"tune: {algo}'s search finished no configuration; nothing to confirm", flush=True)

@@ -145,6 +145,10 @@ class Entry(BaseModel):
     """Where ``commit`` came from: the search's parent run, or the writer's HEAD."""
     written: str | None = None
     """When the entry was written (UTC, ISO 8601)."""
+    schedule: tuple[dict[str, Any], ...] | None = None
+    """A population-based search's winner (``searcher: pbt``): the schedule its fields followed,
+    ``[{at: env steps, set: {field: value}}, ...]``: what ``preset: tuned`` replays where improved
+    (the fields its first step sets are ``config``'s then); where the default stands, the schedule tried."""
 
 
 def _num(x: float) -> str:
@@ -192,6 +196,14 @@ def entry_paths(registry: Path, task: str, algo: str) -> list[Path]:
 def applied(entry: Entry) -> dict:
     """The fields ``preset: tuned`` sets from ``entry``: none where the default stands."""
     return {} if entry.verdict == DEFAULT_STANDS else dict(entry.config)
+
+
+def applied_schedule(entry: Entry) -> list | None:
+    """The schedule ``preset: tuned`` replays from ``entry`` (a PBT winner's, improved), as
+    [[env steps, fields], ...] (sweeps/spaces.py TrialSpec.schedule); None: fixed fields."""
+    if entry.verdict == DEFAULT_STANDS or not entry.schedule:
+        return None
+    return [[int(step["at"]), dict(step["set"])] for step in entry.schedule]
 
 
 def _scores(fig: dict) -> dict:
@@ -242,6 +254,8 @@ def _random_start(plan) -> int | None:
     rule); None where neither says."""
     if getattr(plan, "random_start", None) is not None:
         return int(plan.random_start)
+    if plan.sweep.searcher == "pbt":  # every member's first fields are a random draw
+        return int(plan.sweep.pbt.members)
     try:
         from sweeps.search import random_start
     except ImportError:
@@ -274,7 +288,8 @@ def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: 
     for algo, v in comp["algorithms"].items():
         plan = searches[algo]
         winner = winners[algo][0]
-        fields = _plain(json.loads(json.dumps(winner["fields"], default=str)))
+        schedule = _plain(json.loads(json.dumps(winner.get("schedule"), default=str)))  # a PBT winner's
+        fields = _plain(json.loads(json.dumps(winner["fields"] or (schedule or [{}])[0].get("set", {}), default=str)))
         improved = bool(v["improved"])
         config = fields if improved else {}
         params = spaces.trial_params(tp.task, tp.sweep.budget, {**plan.sets}, {"algo": algo, **config})
@@ -293,13 +308,13 @@ def write_entries(tp, comp: dict, winners: dict, confirm_parent: str, searches: 
                       commit=commit, fingerprint=fp, fingerprint_id=fingerprint_id(fp),
                       verdict=IMPROVED if improved else DEFAULT_STANDS, candidate=None if improved else fields,
                       constraints=limits or {"cost": limit}, searcher=plan.sweep.searcher,
-                      num_samples=plan.sweep.num_samples,
+                      num_samples=plan.sweep.num_samples or (plan.sweep.pbt.members if plan.sweep.pbt else None),
                       random_start=_random_start(plan), search_space=_space(plan.sweep.search),
                       by_seed={"tuned": _by_seed(v["tuned"]), "default": _by_seed(v["default"])},
                       gap=None if gap is None else tuple(_f(x) for x in gap), pairs=v.get("pairs"),
                       p_improvement=_f(v.get("p_improvement")),
                       intervals={k: METHODS[k] for k in ("mean", "paired", "proportion")},
-                      commit_source=source, written=now)
+                      commit_source=source, written=now, schedule=schedule)
         key = key_of(entry)
         path = entry_path(registry, tp.task, algo, key)
         text = yaml.safe_dump(_plain(entry.model_dump()), sort_keys=False, width=110, allow_unicode=True)
@@ -398,6 +413,18 @@ def read_entry(path: Path) -> Entry:
         for part in ("config", "candidate"):
             for name, value in (getattr(entry, part) or {}).items():
                 check_field(name, value, (entry.algo,), (part, name))
+        if entry.schedule is not None:  # as a sweep file's group schedule is checked (changeable fields)
+            from sweeps.sweep_file import Group, check_changeable
+
+            try:
+                steps = Group.model_validate({"schedule": list(entry.schedule)}).schedule
+            except ValidationError as e:
+                err = e.errors()[0]
+                raise FieldError(err["loc"], err["msg"]) from None
+            for i, step in enumerate(steps):
+                for name, value in step.set.items():
+                    check_field(name, value, (entry.algo,), ("schedule", i, "set", name))
+                check_changeable(step.set, (entry.algo,), ("schedule", i, "set"))
     except FieldError as e:
         raise ValueError(f"{path}: {'.'.join(map(str, e.loc))}: {e.message}") from None
     return entry
@@ -506,18 +533,23 @@ def listing(registry: Path) -> str:
             continue
         f = e.fresh
         fields = ", ".join(f"{k}={v}" for k, v in e.config.items())
+        later = ""
+        if e.schedule and len(e.schedule) > 1:  # a PBT winner: its fields change during training
+            ats = ", ".join(f"{int(step['at']):,}" for step in e.schedule[1:])
+            later = f" at first, then its schedule's at {ats} env steps"
         if e.verdict == DEFAULT_STANDS:
             tried = ", ".join(f"{k}={v}" for k, v in (e.candidate or e.config).items())
-            what = f"the default stands (tuned {tried or '?'} was not shown better)"
+            what = f"the default stands (tuned {tried or '?'}{later} was not shown better)"
         else:
-            what = fields
+            what = fields + later
         missing = [name for name, v in (("verdict", e.verdict), ("searcher", e.searcher), ("samples", e.num_samples),
                                         ("random start", e.random_start), ("search space", e.search_space),
                                         ("per-seed scores", e.by_seed), ("paired gap", e.gap),
                                         ("interval methods", e.intervals), ("the commit's source", e.commit_source))
                    if v is None]
         search = (f"; search {e.searcher} × {e.num_samples} samples ({_unknown(e.random_start)} from its random start)"
-                  if e.searcher and e.num_samples else "")
+                  if e.searcher and e.num_samples and e.searcher != "pbt" else
+                  f"; search pbt, a population of {e.num_samples}" if e.searcher == "pbt" else "")
         lines.append(f"  {e.task} {e.algo} @ {e.budget} (limit {e.cost_limit:g}): {what}; verdict "
                      f"{_unknown(e.verdict)}; fresh seeds {len(e.fresh_seeds)}: return {_g(f.return_mean)}, cost "
                      f"{_g(f.cost_mean)} (default {_g(e.default_fresh.return_mean)}, {_g(e.default_fresh.cost_mean)})"

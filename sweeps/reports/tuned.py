@@ -156,10 +156,12 @@ def markdown(tp, comp: dict) -> str:
     n, seeds, steps = first.sweep.num_samples, len(first.seeds), first.timesteps
     fresh = sorted({s for v in comp["algorithms"].values() for s in v["tuned"]["seeds"] + v["default"]["seeds"]})
     m = verdicts.METHODS
+    budget = (f"{n} {t.searcher.upper()} samples × {seeds} seeds × {steps:,} env steps; each one's best" if
+              t.searcher != "pbt" else f"a population of {seeds} members (PBT, one seed each) × {steps:,} env steps; "
+              "each one's best member's schedule")
     lines = [f"## Tuned comparison `{tp.name}` on `{tp.task}`", "",
-             f"Every algorithm searched over its own space at the same planned budget: {n} {t.searcher.upper()} "
-             f"samples × {seeds} seeds × {steps:,} env steps; each one's best and its default then rerun on "
-             f"{t.confirm_seeds} fresh seeds ({', '.join(map(str, fresh))}).", "",
+             f"Every algorithm searched over its own space at the same planned budget: {budget} and its default then "
+             f"rerun on {t.confirm_seeds} fresh seeds ({', '.join(map(str, fresh))}).", "",
              f"Intervals: return and cost, {m['mean']}; the gap, {m['paired']}; P(feasible), {m['proportion']}. "
              f"Feasible: ≥ {verdicts.FEASIBLE_SHARE:.0%} of the seeds within the limit. Improved: tuned is feasible "
              "and the paired gap's interval lies above 0.", ""]
@@ -194,6 +196,10 @@ def markdown(tp, comp: dict) -> str:
     for algo, v in comp["algorithms"].items():
         w, s = v["winner"], v["spread"]
         fields = ", ".join(f"{k}={f'{x:.3g}' if isinstance(x, float) else x}" for k, x in w["fields"].items())
+        if w.get("schedule"):  # a PBT winner: its schedule (sweeps/pbt.py)
+            fields = " → ".join(f"from {step['at']:,}: " + ", ".join(
+                f"{k}={f'{x:.3g}' if isinstance(x, float) else x}" for k, x in step["set"].items())
+                for step in w["schedule"])
         search = (w["search"]["return_mean"], *(_nan(w["search"].get(k)) for k in ("return_mean_ci_low",
                                                                                      "return_mean_ci_high")))
         lines.append(f"| {algo} | {fields or '(its default)'}{'' if w['feasible'] else ' (none feasible: least cost)'}"

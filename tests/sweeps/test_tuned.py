@@ -298,3 +298,52 @@ def test_a_tampered_or_missing_entry_is_refused_before_ray_in_one_line(tmp_path,
     with pytest.raises(ValueError) as e:
         cli.make_plan(_args(tmp_path, PRESET))
     assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+PBT_TUNED = """task: lac/PointHazard-v0
+budget: smoke
+algo: [lac, ppo_lag, sac_lag]
+eval_episodes: 0
+tune: {searcher: pbt, pbt: {members: 4, interval: 1000}, confirm_seeds: 2}
+"""
+
+
+def test_a_pbt_tuned_comparison_gives_every_algorithm_the_same_population_and_confirms_schedules(tmp_path, capsys):
+    """``tune: {searcher: pbt}``: each algorithm a population of the same size over its changeable
+    fields at the same env steps; its best member's schedule (read back with the trials) confirmed
+    beside its default."""
+    import json
+
+    from lac_rllib.algorithms.registry import changeable_space
+    from sweeps.tuned import budget_of, confirmation_sweep, print_tuned_plan, search_winners
+
+    tp, = cli.make_plan(_args(tmp_path, PBT_TUNED))
+    assert {a: budget_of(p) for a, p in tp.searches.items()} == {a: (4, 1, 2000) for a in ("lac", "ppo_lag", "sac_lag")}
+    assert all(p.pbt == (1000,) and p.seeds == (0, 1, 2, 3) for p in tp.searches.values())
+    assert all(set(p.sweep.search) == set(changeable_space(a)) for a, p in tp.searches.items())
+    assert {"actor_lr", "critic_lr", "nu_lr"} <= set(tp.searches["lac"].sweep.search)  # LAC's rates change mid-run
+    print_tuned_plan(tp)
+    assert "population-based training ranked by the one feasibility rule" in capsys.readouterr().out
+    schedule = [[0, {"lr": 0.001}], [1000, {"lr": 0.0012}]]
+    trials = pd.DataFrame({"trial_id": ["a", "b", "c"], "config": ["x", "y", "z"], "seed": [0, 1, 2],
+                           "episode_return": [9.0, 5.0, 20.0], "episode_cost": [1.0, 0.5, 9.0],
+                           "cost_limit": [2.0, 2.0, 2.0], "schedule": [json.dumps(schedule), "[[0, {}]]", "[[0, {}]]"]})
+    winner, = search_winners(tp, "ppo_lag", trials)  # the feasible best: c is over its limit
+    assert winner["schedule"] == [{"at": 0, "set": {"lr": 0.001}}, {"at": 1000, "set": {"lr": 0.0012}}]
+    assert winner["feasible"] and winner["search"]["return_mean"] == 9.0
+    over = trials.assign(episode_cost=[5.0, 3.0, 9.0])
+    least, = search_winners(tp, "ppo_lag", over)  # none feasible: the least costly, said
+    assert least["config"] == "y" and not least["feasible"]
+    cfile = confirmation_sweep(tp, {"ppo_lag": [winner]})
+    assert cfile.groups["ppo_lag-tuned1"].schedule[1].at == 1000 and cfile.groups["ppo_lag-default"].schedule is None
+
+
+@pytest.mark.parametrize("text,needle", [
+    (PBT_TUNED.replace("pbt: {members: 4, interval: 1000}", "num_samples: 4"), "num_samples with searcher pbt"),
+    (PBT_TUNED.replace("searcher: pbt, ", ""), "tune.pbt: pbt with searcher tpe"),
+    (PBT_TUNED.replace("interval: 1000", "interval: 5000"), "not shorter than the budget"),
+])
+def test_bad_pbt_tune_sections_are_refused_in_one_line(tmp_path, text, needle):
+    with pytest.raises(ValueError) as e:
+        cli.make_plan(_args(tmp_path, text))
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)

@@ -251,3 +251,34 @@ def test_an_entry_tuned_with_a_limit_per_constraint_is_kept_by_them_and_refused_
         cli.make_plan(_args(tmp_path, base + "set: {cost_limit: 0}\n", "--name", "x3"))
     assert "was tuned with a limit per constraint (hazard 2, lane 10), trial" in str(e.value)
     assert "runs one limit 0 on the summed cost" in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+SCHEDULE = [{"at": 0, "set": {"lr": 0.002, "clip_param": 0.25}}, {"at": 1000, "set": {"lr": 0.004, "clip_param": 0.2}}]
+
+
+def test_a_pbt_winners_schedule_is_what_preset_tuned_replays_below_the_trials_own_fields(tmp_path):
+    _entry(tmp_path / "registry", verdict="improved", schedule=SCHEDULE, searcher="pbt")
+    plan, = cli.make_plan(_args(tmp_path, PRESET + "groups:\n  plain: {}\n  own: {set: {clip_param: 0.15}}\n"))
+    plain, own = plan.trials
+    assert plain.schedule == [[0, {"lr": 0.002, "clip_param": 0.25}], [1000, {"lr": 0.004, "clip_param": 0.2}]]
+    assert plain.params["lr"] == 0.002 and not plain.default
+    assert own.schedule == [[0, {"lr": 0.002}], [1000, {"lr": 0.004}]] and own.params["clip_param"] == 0.15
+    assert "its schedule's at 1,000 env steps" in listing(tmp_path / "registry")
+
+
+def test_a_pbt_schedule_whose_default_stands_is_not_replayed(tmp_path):
+    _entry(tmp_path / "registry", verdict="default-stands", schedule=SCHEDULE, config={}, searcher="pbt")
+    plan, = cli.make_plan(_args(tmp_path, PRESET))
+    assert plan.trials[0].schedule is None and plan.trials[0].params["lr"] != 0.004
+
+
+@pytest.mark.parametrize("bad, needle", [
+    ([{"at": 0, "set": {"hidden": [8, 8]}}], "schedule.0.set.hidden: hidden is not a field ppo_lag can change"),
+    ([{"at": 0, "set": {"lr": -1.0}}], "schedule.0.set.lr"),
+    ([{"at": 500, "set": {"lr": 0.1}}, {"at": 100, "set": {"lr": 0.2}}], "strictly ascending"),
+])
+def test_a_registry_schedule_is_read_as_untrusted_input(tmp_path, bad, needle):
+    path = _entry(tmp_path / "registry", verdict="improved", schedule=bad, searcher="pbt")
+    with pytest.raises(ValueError) as e:
+        read_entry(path)
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
