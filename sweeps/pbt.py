@@ -49,8 +49,11 @@ OVERRIDES = "overrides"
 #: A member's record in each of its checkpoints and, at its end, in its MLflow run: its last rows
 #: (the window), its schedule [[env steps, {field: value}], ...] and its parents [[env steps, member]].
 MEMBER_FILE = "member.json"
-#: The MLflow tag of a member's parents (the members it copied, and when).
+#: The MLflow tag of a member's ancestry: the members its weights descend from and when each copy
+#: was made (a copy replaces its ancestry with the donor's, then the copy).
 PARENTS_TAG = "lac.pbt.parents"
+#: The MLflow tag of every copy the member made, in order, [[env steps, donor], ...] (its own history).
+COPIES_TAG = "lac.pbt.copies"
 #: A member's changeable fields are logged each iteration as ``schedule/FIELD``: its schedule's curve.
 SCHEDULE_PREFIX = "schedule/"
 

@@ -35,7 +35,7 @@ from lac_rllib.tasks.user import register_definition
 from sweeps import spaces
 from sweeps.integrity import CHECKSUM_TAG, manifest_tag
 from sweeps.objective import CONSTRAINT, OBJECTIVE, OBJECTIVE_WINDOW, WALL_TIME_S, objective
-from sweeps.pbt import MEMBER_FILE, PARENTS_TAG, SCHEDULE_PREFIX, fields_at, window_row
+from sweeps.pbt import COPIES_TAG, MEMBER_FILE, PARENTS_TAG, SCHEDULE_PREFIX, fields_at, window_row
 from sweeps.score import (
     SCORE_COST,
     SCORE_RETURN,
@@ -348,7 +348,10 @@ class SweepTrial(tune.Trainable):
             at = int(saved["env_steps"])
             member["schedule"] = [*saved["schedule"], [at, self._changeable()]]
             member["parents"] = [*saved["parents"], [at, saved["trial_name"]]]
-            self.tracker.set_tags({PARENTS_TAG: json.dumps(member["parents"])[:4000]})
+            previous = self.tracker.previous.data.tags.get(COPIES_TAG) if self.tracker.previous else None
+            copies = [*json.loads(previous or "[]"), [at, saved["trial_name"]]]
+            self.tracker.set_tags({PARENTS_TAG: json.dumps(member["parents"])[:4000],
+                                   COPIES_TAG: json.dumps(copies)[:4000]})
         self.member = member
 
     def cleanup(self) -> None:

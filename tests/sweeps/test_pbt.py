@@ -282,60 +282,19 @@ def _history(client, run, key):
 
 
 @pytest.mark.slow
-def test_a_pbt_sweep_runs_from_plan_to_the_replayed_winner_on_fresh_seeds(tmp_path):
-    (tmp_path / "pbt.yaml").write_text(PBT_FILE)
-    cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--config", str(tmp_path / "pbt.yaml"),
-           "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results"),
-           "--max-concurrent", "2", "--confirm-top", "1", "--confirm-seeds", "2"]
-    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    assert "a population of 4 members, one seed each: seeds 0..3; 8,000 env steps in all" in proc.stdout
-    client, members, parents = _children(tmp_path / "mlflow.db")
-    assert len(members) == 4 and all(m.info.status == "FINISHED" for m in members)
-    for m in members:  # every member trained its budget once: the population spent 4 x 2,000 env steps
-        assert [s for s, _ in _history(client, m, "env_steps")] == [500, 1000, 1500, 2000]
-    # At 1,000 env steps the worst member copied the best and perturbed each field by x0.8 or x1.2 (or redrew it).
-    copied = [m for m in members if "lac.pbt.parents" in m.data.tags]
-    assert len(copied) == 1
-    (at, donor_name), = json.loads(copied[0].data.tags["lac.pbt.parents"])
-    donor, = [m for m in members if m.data.tags["mlflow.runName"] == donor_name]
-    assert at == 1000
-    window = {m.data.tags["mlflow.runName"]: dict(_history(client, m, OBJECTIVE_WINDOW))[1000] for m in members}
-    assert window[donor_name] == max(window.values()) and window[copied[0].data.tags["mlflow.runName"]] == min(
-        window.values())
-    before, after = dict(_history(client, donor, "schedule/lr")), dict(_history(client, copied[0], "schedule/lr"))
-    assert after[1500] == after[2000] != after[1000]
-    ratio = after[1500] / before[1000]
-    assert math.isclose(ratio, 0.8) or math.isclose(ratio, 1.2) or 1e-5 < after[1500] < 1.0
-    # The figure of the population, on the parent run.
-    parent = [p for p, n in parents.items() if n == "pbt-PointHazard-v0-smoke"][0]
-    assert "pbt_population.png" in [a.path for a in client.list_artifacts(parent)]
-    # The winner's schedule, replayed on fresh seeds beside the default.
-    _, confirm, _ = _children(tmp_path / "mlflow.db", "pbt-PointHazard-v0-smoke-confirm")
-    assert sorted(r.data.tags["lac.config"] for r in confirm) == ["ppo_lag-default-PointHazard-v0"] * 2 + [
-        "ppo_lag-pbt1-PointHazard-v0"] * 2
-    assert sorted(json.loads(r.data.params["seed"]) for r in confirm) == [2000, 2000, 3000, 3000]
-    winner = max((m for m in members), key=lambda m: m.data.metrics["episode_return"]
-                 if m.data.metrics["feasible"] else -math.inf)
-    with open(client.download_artifacts(winner.info.run_id, "member.json")) as f:
-        schedule = json.load(f)["schedule"]
-    for r in (r for r in confirm if "pbt1" in r.data.tags["lac.config"]):
-        replayed = _history(client, r, "schedule/lr")
-        assert [s for s, _ in replayed] == [500, 1000, 1500, 2000]
-        due = [float(fields_at(schedule, s - 500)["lr"]) for s, _ in replayed]  # the iteration ending at s ran it
-        assert [v for _, v in replayed] == pytest.approx(due)
-
-
-@pytest.mark.slow
-def test_a_pbt_sweep_killed_mid_population_resumes_without_losing_a_member_or_a_perturbed_value(tmp_path):
+def test_a_pbt_sweep_killed_mid_population_resumes_whole_and_its_winner_is_replayed_on_fresh_seeds(tmp_path):
+    """From plan to confirmation, killed (SIGKILL, the driver and its workers) after its first
+    exploit and resumed: no member lost or duplicated, each trained its budget once, the copy and
+    its perturbed fields kept; the copy went from the best window to the worst; the winner's
+    schedule replayed on fresh seeds beside the default; the population's figure on the parent run."""
     (tmp_path / "pbt.yaml").write_text(PBT_FILE.replace("interval: 1000", "interval: 500"))
     cmd = [sys.executable, str(REPO / "sweeps" / "run.py"), "--config", str(tmp_path / "pbt.yaml"),
            "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}", "--storage", str(tmp_path / "ray_results"),
-           "--max-concurrent", "2"]
+           "--max-concurrent", "2", "--confirm-top", "1", "--confirm-seeds", "2"]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     copied_before = {}
-    try:  # until a member has copied another (an exploit happened) and none has finished
+    try:  # until a member has copied another (an exploit happened)
         deadline = time.time() + 400
         while time.time() < deadline and not copied_before:
             time.sleep(2)
@@ -344,30 +303,53 @@ def test_a_pbt_sweep_killed_mid_population_resumes_without_losing_a_member_or_a_
                     client, members, _ = _children(tmp_path / "mlflow.db")
                 except Exception:  # the store mid-write
                     continue
-                copied_before = {m.data.tags["lac.trial_id"]: _history(client, m, "schedule/lr")
-                                 for m in members if "lac.pbt.parents" in m.data.tags}
+                copied_before = {m.data.tags["lac.trial_id"]: (json.loads(m.data.tags["lac.pbt.copies"])[0],
+                                                               _history(client, m, "schedule/lr"))
+                                 for m in members if "lac.pbt.copies" in m.data.tags}
         assert copied_before, "no exploit before the deadline"
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+        out = proc.communicate()[0]
+    assert "a population of 4 members, one seed each: seeds 0..3; 8,000 env steps in all" in out
     resumed = subprocess.run([*cmd, "--resume"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert resumed.returncode == 0, resumed.stdout[-3000:] + resumed.stderr[-3000:]
-    client, members, _ = _children(tmp_path / "mlflow.db")
+    client, members, parents = _children(tmp_path / "mlflow.db")
     ids = [m.data.tags["lac.trial_id"] for m in members]
     assert len(members) == 4 and len(set(ids)) == 4, "no member lost, none duplicated"
     assert all(m.info.status == "FINISHED" for m in members)
-    for m in members:
-        steps = [s for s, _ in _history(client, m, "env_steps")]
-        assert steps == sorted(set(steps)) and steps[-1] == 2000, steps
-    for trial_id, before in copied_before.items():  # the perturbed value kept through the kill
+    for m in members:  # each trained its budget once: the population spent 4 x 2,000 env steps
+        assert [s for s, _ in _history(client, m, "env_steps")] == [500, 1000, 1500, 2000]
+    for trial_id, (first, before) in copied_before.items():  # the perturbed value kept through the kill
         m, = [m for m in members if m.data.tags["lac.trial_id"] == trial_id]
+        copies = json.loads(m.data.tags["lac.pbt.copies"])  # its own copies, in order; parents: its ancestry
+        assert copies[0] == first and json.loads(m.data.tags["lac.pbt.parents"])[-1] == copies[-1]
+        (at, donor_name), later = copies[0], [c[0] for c in copies[1:]]
         after = dict(_history(client, m, "schedule/lr"))
-        copied_at = json.loads(m.data.tags["lac.pbt.parents"])[0][0]
-        perturbed = [v for s, v in before if s > copied_at]
+        perturbed = [v for s, v in before if s > at]
         if perturbed:  # logged before the kill: the same value after the resume, until its next copy
-            later = json.loads(m.data.tags["lac.pbt.parents"])
-            next_copy = later[1][0] if len(later) > 1 else math.inf
-            assert all(v == perturbed[0] for s, v in after.items() if copied_at < s <= next_copy)
+            assert all(v == perturbed[0] for s, v in after.items() if at < s <= min(later, default=math.inf))
+        # The copy: from the member with the best window there to the one with the worst.
+        window = {r.data.tags["mlflow.runName"]: dict(_history(client, r, OBJECTIVE_WINDOW)).get(at) for r in members}
+        assert window[donor_name] == max(window.values()) and window[m.data.tags["mlflow.runName"]] == min(
+            window.values())
+        donor, = [r for r in members if r.data.tags["mlflow.runName"] == donor_name]
+        ratio = after[at + 500] / dict(_history(client, donor, "schedule/lr"))[at]
+        assert math.isclose(ratio, 0.8) or math.isclose(ratio, 1.2) or 1e-5 < after[at + 500] < 1.0
+    parent = [p for p, n in parents.items() if n == "pbt-PointHazard-v0-smoke"][0]
+    assert "pbt_population.png" in [a.path for a in client.list_artifacts(parent)]
+    # The winner's schedule, replayed on fresh seeds beside the default.
+    _, confirm, _ = _children(tmp_path / "mlflow.db", "pbt-PointHazard-v0-smoke-confirm")
+    assert sorted(r.data.tags["lac.config"] for r in confirm) == ["ppo_lag-default-PointHazard-v0"] * 2 + [
+        "ppo_lag-pbt1-PointHazard-v0"] * 2
+    assert sorted(json.loads(r.data.params["seed"]) for r in confirm) == [2000, 2000, 3000, 3000]
+    winner = max(members, key=lambda m: m.data.metrics["episode_return"] if m.data.metrics["feasible"] else -math.inf)
+    with open(client.download_artifacts(winner.info.run_id, "member.json")) as f:
+        schedule = json.load(f)["schedule"]
+    for r in (r for r in confirm if "pbt1" in r.data.tags["lac.config"]):
+        replayed = _history(client, r, "schedule/lr")
+        assert [s for s, _ in replayed] == [500, 1000, 1500, 2000]
+        due = [float(fields_at(schedule, s - 500)["lr"]) for s, _ in replayed]  # the iteration ending at s ran it
+        assert [v for _, v in replayed] == pytest.approx(due)
 
 
 @pytest.mark.slow
