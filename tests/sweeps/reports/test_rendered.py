@@ -81,3 +81,25 @@ def test_the_ladders_verdicts_quote_only_what_its_data_says():
     quoted = re.findall(r"-?\d+(?:\.\d+)?", verdicts)
     assert len(quoted) > 50
     assert not [q for q in quoted if q not in allowed]
+
+
+def test_the_committed_tuned_comparison_is_rendered_from_its_data(tmp_path):
+    folder = DOCS / "tuned-pointhazard"
+    rendered.render(folder, tmp_path)
+    assert (tmp_path / "report.md").read_text() == (folder / "report.md").read_text()
+
+
+def test_the_tuned_comparisons_verdicts_quote_only_what_its_data_says():
+    """Every number in docs/tuned-pointhazard/README.md's verdicts is printed by report.md, or is a
+    confirmation seed's return or cost rounded to 2 decimals."""
+    import re
+
+    folder = DOCS / "tuned-pointhazard"
+    text = (folder / "README.md").read_text().replace("−", "-")
+    verdicts = text.split("## Verdicts", 1)[1].split("\n## ", 1)[0]
+    allowed = set(re.findall(r"-?\d+(?:\.\d+)?", (folder / "report.md").read_text()))
+    trials = pd.read_csv(folder / "confirmation.csv")
+    allowed |= {f"{x:.2f}" for x in [*trials["episode_return"], *trials["episode_cost"]]}
+    quoted = re.findall(r"-?\d+(?:\.\d+)?", verdicts)
+    assert len(quoted) > 40
+    assert not [q for q in quoted if q not in allowed]
