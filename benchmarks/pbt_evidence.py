@@ -1,5 +1,5 @@
-"""Population-based training against the constrained TPE and random search at equal env steps
-(docs/pbt-evidence/): on one task and algorithm, four searches, each winner confirmed on fresh seeds.
+"""Population-based training against the constrained TPE and random search at equal env steps, on
+one task and algorithm: four searches, each winner confirmed on fresh seeds (results in ``--out``).
 
     python benchmarks/pbt_evidence.py --task lac/PointHazard-v0 --algo ppo_lag --budget quick \\
         --members 8 --interval 5000 --out RUN_DIR/pbt-pointhazard-ppo_lag
