@@ -488,3 +488,27 @@ def test_an_interval_grows_after_each_exploit():
         for i, m in enumerate(members):
             _report(scheduler, controller, m, t, float(i))
     assert scheduler.exploits == [2] and scheduler.intervals == [400.0] and scheduler.next_sync == [700.0]
+
+
+def test_a_failed_member_does_not_stop_the_population():
+    """A member that failed for good (Tune's ERROR: no longer live) is not waited for: the others
+    exploit at their interval and go on."""
+    from ray.tune.schedulers.pbt import _PBTTrialState
+
+    scheduler = _scheduler(intervals=(100,))
+    members = [_Member(i) for i in range(3)]
+    controller = _Controller(members)
+    for m in members:
+        scheduler._trial_state[m] = _PBTTrialState(m)
+
+    class _Live(_Controller):
+        def get_live_trials(self):
+            return [m for m in self.members if m.status not in ("TERMINATED", "ERROR")]
+
+    controller = _Live(members)
+    members[2].status = "ERROR"  # failed before its first exploit
+    _report(scheduler, controller, members[0], 100, 5.0)
+    assert scheduler.exploits == [0], "one live member still short of the interval"
+    _report(scheduler, controller, members[1], 100, 1.0)
+    assert scheduler.exploits == [1] and members[1].copied_from is not None and members[2].copied_from is None
+    assert scheduler.choose_trial_to_run(controller) in members[:2]
