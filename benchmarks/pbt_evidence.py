@@ -86,7 +86,7 @@ def results(out: Path, confirm_seeds: int) -> pd.DataFrame:
         spent = sum(int(r.data.metrics.get("env_steps", 0)) for r in tracker.children(parents[name]))
         confirm = (sweep_results(tracker, parents[f"{name}-confirm"])[0] if f"{name}-confirm" in parents
                    else pd.DataFrame(columns=["default", "status", "episode_return", "episode_cost", "cost_limit"]))
-        winner = confirm[~confirm["default"].astype(bool) & confirm["status"].eq("FINISHED")]
+        winner = confirm[~confirm["default"].astype(bool) & confirm["status"].eq("TERMINATED")]  # ran to its end
         limit = float(winner["cost_limit"].iloc[0]) if len(winner) else float("nan")
         v = verdict(winner["episode_return"], winner["episode_cost"], limit)
         m = winner.to_dict("records")
@@ -104,6 +104,9 @@ def markdown(table: pd.DataFrame) -> str:
     lines = ["| search | env steps spent | winner's fresh-seed return [interval] | cost | P(feasible) [Wilson] | "
              "P(feasible) ≥ 0.8 |", "|---|---:|---:|---:|---:|---|"]
     for r in table.to_dict("records"):
+        if not r["fresh_seeds"]:  # the search found nothing feasible: there was no winner to confirm
+            lines.append(f"| {r['method']} | {r['env_steps_spent']:,} | – (no feasible winner to confirm) | – | – | no |")
+            continue
         lines.append(f"| {r['method']} | {r['env_steps_spent']:,} | {r['return']:.3g} [{r['return_low']:.3g}, "
                      f"{r['return_high']:.3g}] | {r['cost']:.3g} | {r['p_feasible']:.2f} [{r['p_feasible_low']:.2f}, "
                      f"{r['p_feasible_high']:.2f}] | {'yes' if r['meets_p_feasible'] else 'no'} |")
