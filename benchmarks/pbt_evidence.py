@@ -105,7 +105,8 @@ def markdown(table: pd.DataFrame) -> str:
              "P(feasible) ≥ 0.8 |", "|---|---:|---:|---:|---:|---|"]
     for r in table.to_dict("records"):
         if not r["fresh_seeds"]:  # the search found nothing feasible: there was no winner to confirm
-            lines.append(f"| {r['method']} | {r['env_steps_spent']:,} | – (no feasible winner to confirm) | – | – | no |")
+            lines.append(f"| {r['method']} | {r['env_steps_spent']:,} | – (no feasible winner to confirm) "
+                         "| – | – | no |")
             continue
         lines.append(f"| {r['method']} | {r['env_steps_spent']:,} | {r['return']:.3g} [{r['return_low']:.3g}, "
                      f"{r['return_high']:.3g}] | {r['cost']:.3g} | {r['p_feasible']:.2f} [{r['p_feasible_low']:.2f}, "
