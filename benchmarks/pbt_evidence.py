@@ -14,12 +14,15 @@ the same command goes on where it stopped):
 - ``random``: Optuna's random sampler, the same samples.
 
 Each winner (its best feasible configuration, or schedule for PBT) is confirmed beside the default
-on ``--confirm-seeds`` fresh seeds (``--confirm-top 1``). ``results.csv`` and ``results.md`` in
-``--out``: per search the env steps it spent (every trial's last env steps, summed, ASHA's early
-stops included), its winner's fresh-seed return and cost with their intervals and P(feasible)
-with Wilson's (sweeps/reports/verdicts.py ``verdict``), and whether it meets P(feasible) ≥ 0.8; and
-the goal's verdict: PBT-half against TPE (PBT reaches TPE's fresh-seed return at the same
-P(feasible) in at most half the env steps) by the interval rule: overlapping intervals are ties.
+on ``--confirm-seeds`` fresh seeds (``--confirm-top 1``). Each search's trials and its
+confirmation's are exported to ``search-METHOD.csv`` and ``confirm-METHOD.csv``, and the table is
+rendered from them alone (``--report-only --from-csv`` renders a committed folder again):
+``results.csv`` and ``results.md`` in ``--out``: per search the env steps it spent (every trial's
+last env steps, summed, ASHA's early stops included), its winner's fresh-seed return and cost with
+their intervals and P(feasible) with Wilson's (sweeps/reports/verdicts.py ``verdict``), and
+whether it meets P(feasible) ≥ 0.8; and the goal's verdict: PBT-half against TPE (PBT reaches
+TPE's fresh-seed return at the same P(feasible) in at most half the env steps) by the interval
+rule: overlapping intervals are ties.
 """
 
 from __future__ import annotations
@@ -66,31 +69,59 @@ def run_search(out: Path, method: str, args) -> int:
         return subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
 
 
-def results(out: Path, confirm_seeds: int) -> pd.DataFrame:
-    """Per search: env steps spent, its winner's fresh-seed figures (the confirmation's trials)."""
+#: The data a folder's table is rendered from: each search's trials and its confirmation's.
+SEARCH_CSV, CONFIRM_CSV = "search-{method}.csv", "confirm-{method}.csv"
+
+
+def export(out: Path) -> list[str]:
+    """Each search's trials (with each one's last env steps) and its confirmation's, read back from
+    the MLflow store in ``out`` into CSVs beside it: the data :func:`results` renders the table from.
+    Returns the searches found."""
     from sweeps.reports.results import sweep_results
-    from sweeps.reports.verdicts import FEASIBLE_SHARE, verdict
     from sweeps.tracking import SweepTracker
 
     tracker = SweepTracker(f"sqlite:///{out / 'mlflow.db'}", "lac-sweeps")
     exps = [e.experiment_id for e in tracker.client.search_experiments()]
     parents = {r.data.tags.get("mlflow.runName"): r.info.run_id
                for r in tracker.client.search_runs(exps, filter_string="tags.`lac.sweep` = '1'", max_results=1000)}
-    rows = []
+    found = []
     for method in METHODS:
         name = f"pbt-evidence-{method}"
         if name not in parents:
             continue
         trials, _ = sweep_results(tracker, parents[name])
-        # Each trial's last env steps (a stopped one's where ASHA stopped it; a PBT member trains its own once).
-        spent = sum(int(r.data.metrics.get("env_steps", 0)) for r in tracker.children(parents[name]))
-        confirm = (sweep_results(tracker, parents[f"{name}-confirm"])[0] if f"{name}-confirm" in parents
-                   else pd.DataFrame(columns=["default", "status", "episode_return", "episode_cost", "cost_limit"]))
+        # Each trial's last env steps: where ASHA stopped it, or its budget (a PBT member trains its own once).
+        steps = {r.data.tags.get("lac.trial_id"): int(r.data.metrics.get("env_steps", 0))
+                 for r in tracker.children(parents[name])}
+        trials.assign(env_steps=[steps.get(t, 0) for t in trials["trial_id"]]).to_csv(
+            out / SEARCH_CSV.format(method=method), index=False)
+        if f"{name}-confirm" in parents:
+            sweep_results(tracker, parents[f"{name}-confirm"])[0].to_csv(out / CONFIRM_CSV.format(method=method),
+                                                                        index=False)
+        found.append(method)
+    return found
+
+
+def results(folder: Path, confirm_seeds: int) -> pd.DataFrame:
+    """Per search, from the CSVs :func:`export` wrote: the env steps it spent and its winner's
+    fresh-seed figures (sweeps/reports/verdicts.py ``verdict``: t at 98%, Wilson)."""
+    from sweeps.reports.verdicts import FEASIBLE_SHARE, verdict
+
+    rows = []
+    for method in METHODS:
+        search = folder / SEARCH_CSV.format(method=method)
+        if not search.exists():
+            continue
+        trials = pd.read_csv(search)
+        path = folder / CONFIRM_CSV.format(method=method)
+        confirm = (pd.read_csv(path) if path.exists() else
+                   pd.DataFrame(columns=["default", "status", "episode_return", "episode_cost", "cost_limit",
+                                         "config"]))
         winner = confirm[~confirm["default"].astype(bool) & confirm["status"].eq("TERMINATED")]  # ran to its end
         limit = float(winner["cost_limit"].iloc[0]) if len(winner) else float("nan")
         v = verdict(winner["episode_return"], winner["episode_cost"], limit)
         m = winner.to_dict("records")
-        rows.append({"method": method, "trials": len(trials), "env_steps_spent": spent,
+        rows.append({"method": method, "trials": len(trials), "env_steps_spent": int(trials["env_steps"].sum()),
                      "winner": m[0]["config"] if m else None,
                      "fresh_seeds": v["n_seeds"], "return": v["return"][0], "return_low": v["return"][1],
                      "return_high": v["return"][2], "cost": v["cost"][0], "p_feasible": v["p_feasible"][0],
@@ -136,17 +167,22 @@ def main(argv=None) -> int:
     p.add_argument("--extra", default="", help="sweep-file lines every search takes (e.g. 'eval_episodes: 5\\n')")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--only", choices=METHODS, action="append", help="run these searches (default: all four)")
-    p.add_argument("--report-only", action="store_true")
+    p.add_argument("--report-only", action="store_true", help="no search run: the table from what is in --out")
+    p.add_argument("--from-csv", action="store_true", help="with --report-only: the table from --out's CSVs alone "
+                                                            "(a committed folder), not its MLflow store")
     args = p.parse_args(argv)
     args.extra = args.extra.replace("\\n", "\n")
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "command.json").write_text(json.dumps(vars(args), default=str, indent=1))
+    if not args.report_only:
+        (args.out / "command.json").write_text(json.dumps(vars(args), default=str, indent=1))
     if not args.report_only:
         for method in args.only or METHODS:
             rc = run_search(args.out, method, args)
             if rc != 0:
                 print(f"{method}: exit {rc}; see {args.out / (method + '.log')}", file=sys.stderr)
                 return rc
+    if not args.from_csv:
+        export(args.out)
     table = results(args.out, args.confirm_seeds)
     table.to_csv(args.out / "results.csv", index=False)
     (args.out / "results.md").write_text(markdown(table))
