@@ -9,9 +9,10 @@ the same command goes on where it stopped):
 
 - ``pbt``: ``search: pbt``, ``--members`` members × the budget (sweeps/pbt.py);
 - ``pbt-half``: the same with half the members: half the env steps;
-- ``tpe``: the constrained TPE with its scheduler (``scheduler: asha``) over the same fields, as
-  many samples as members, one seed each: the same planned env steps (ASHA spends fewer);
-- ``random``: Optuna's random sampler, the same samples.
+- ``tpe``: the constrained TPE with its scheduler (``scheduler: asha``) over the same fields, one
+  seed per sample, drawing until it has spent PBT's env steps (``env_steps_budget``: members ×
+  the budget; an early stop frees its rest for more samples, at most 4 × members);
+- ``random``: Optuna's random sampler under the same budget of spent env steps.
 
 Each winner (its best feasible configuration, or schedule for PBT) is confirmed beside the default
 on ``--confirm-seeds`` fresh seeds (``--confirm-top 1``). Each search's trials and its
@@ -51,9 +52,14 @@ def sweep_text(method: str, task: str, algo: str, budget, members: int, interval
 
     # The fields PBT changes, with the same ranges (an algorithm's rates outside its search space too).
     search = declared_search(algo, task, budget, {"algo": algo}, "default", changeable=True)
+    from sweeps.spaces import get_budget
+
+    # The env steps PBT spends (members × budget) as this search's budget of spent env steps: an early
+    # stop (ASHA) frees its rest for more draws, up to 4 × members samples.
+    spend = members * get_budget(budget).for_task(task)
     searcher = "tpe\nscheduler: asha" if method == "tpe" else "random"
     return (head + yaml.safe_dump({"search": search}, sort_keys=False, width=110)
-            + f"searcher: {searcher}\nnum_samples: {members}\nseeds: 1\n")
+            + f"searcher: {searcher}\nnum_samples: {4 * members}\nseeds: 1\nenv_steps_budget: {spend}\n")
 
 
 def run_search(out: Path, method: str, args) -> int:

@@ -167,6 +167,10 @@ def plan_sweep(sweep: SweepFile, space: str, infra: Infra, search_dirs: tuple[st
         grace, why = grace_period(trials or first, timesteps, sweep.grace_period)
         early = (grace, why, tuple(milestones(grace, timesteps)))
     population = check_pbt(sweep, first[0], timesteps, origin) if pbt else None
+    if sweep.env_steps_budget is not None and sweep.env_steps_budget < len(seeds) * timesteps:
+        raise ValueError(f"{origin(('env_steps_budget',))} {sweep.env_steps_budget:,} is less than one configuration "
+                         f"costs ({len(seeds)} seeds × {timesteps:,} env steps); accepted: at least "
+                         f"{len(seeds) * timesteps:,}")
     name = sweep.name
     from lac_rllib.tasks.fingerprint import fingerprint, fingerprint_id
 

@@ -216,6 +216,9 @@ def print_plan(plan: Plan) -> None:
 
         at_once = configurations_at_once(plan.concurrency, len(seeds))
         print(f"  search: {search_text(sweep.searcher, sweep.num_samples, at_once)}")
+        if sweep.env_steps_budget is not None:  # sweeps/sweep.py EnvStepBudget
+            print(f"  env steps: at most {sweep.env_steps_budget:,} spent in all (the samples are drawn while a whole "
+                  f"configuration more fits; {sweep.num_samples} is an upper bound)")
     episodes = sweep.eval_episodes if sweep.eval_episodes is not None else 10
     modes = sweep.eval_modes or ["generator", "stochastic"]
     print(f"  score: {sweep.score} ("

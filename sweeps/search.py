@@ -134,3 +134,8 @@ def make_sampler(searcher: str, num_samples: int, seed: int | None) -> optuna.sa
             return optuna.samplers.TPESampler(n_startup_trials=startup_size(searcher, num_samples), gamma=gamma,
                                               seed=seed)
     raise ValueError(f"searcher {searcher!r} samples nothing; accepted: random, {', '.join(LEARNING)}")
+
+
+#: What a configuration's seeds spent in all, told to the searcher with its result (sweeps/sweep.py
+#: SeedRepeater): the env steps of each seed's last result, summed (where ASHA stopped it, or its budget).
+SPENT = "env_steps_spent"

@@ -14,7 +14,7 @@ from pathlib import Path
 import optuna
 import ray
 from ray import tune
-from ray.tune.search import Repeater
+from ray.tune.search import Repeater, Searcher
 from ray.tune.search.optuna import OptunaSearch
 
 from lac_rllib.constrained.cpus import run_resources
@@ -28,7 +28,7 @@ from sweeps.record import SWEEP_FILE, SWEEP_YAML, write_record
 from sweeps.reports.results import close_sweep
 from sweeps.scheduler import ConfigurationASHA
 from sweeps.score import SCORE_COST, SCORE_RETURN, SCORES
-from sweeps.search import PicklableNSGAIISampler, make_sampler  # noqa: F401 (a resumed NSGA-II sweep's pickle)
+from sweeps.search import SPENT, PicklableNSGAIISampler, make_sampler  # noqa: F401 (a resumed NSGA-II sweep's pickle)
 from sweeps.tracking import (
     STATUS_TAG,
     STOPPED_TAG,
@@ -56,6 +56,56 @@ class ConstrainedOptunaSearch(OptunaSearch):
         super().on_trial_complete(trial_id, result=result, error=error)
 
 
+class EnvStepBudget(Searcher):
+    """A search that stops drawing configurations at a budget of env steps spent (the sweep file's
+    ``env_steps_budget``): a configuration is drawn only while what finished configurations spent,
+    plus ``per_configuration`` for each one still running and for the new one, stays within
+    ``budget``. A running configuration counts at its full cost until it ends, so the budget is
+    never passed; an early stop (ASHA) frees the rest for new draws. ``num_samples`` is then an upper
+    bound. Wraps the Optuna search inside the seeds' repeater, so each decision is a whole
+    configuration with all its seeds. Its counts are saved beside the searcher's own (a resume
+    goes on with them)."""
+
+    def __init__(self, searcher: Searcher, budget: int, per_configuration: int):
+        super().__init__(metric=searcher.metric, mode=searcher.mode)
+        self.searcher, self.budget, self.per_configuration = searcher, int(budget), int(per_configuration)
+        self.spent, self.live = 0, set()
+
+    def set_search_properties(self, metric, mode, config, **spec) -> bool:
+        return self.searcher.set_search_properties(metric, mode, config, **spec)
+
+    def suggest(self, trial_id: str):
+        if self.spent + (len(self.live) + 1) * self.per_configuration > self.budget:
+            return None if self.live else Searcher.FINISHED  # wait for a running one to free its share
+        config = self.searcher.suggest(trial_id)
+        if isinstance(config, dict):
+            self.live.add(trial_id)
+        return config
+
+    def on_trial_result(self, trial_id: str, result: dict) -> None:
+        self.searcher.on_trial_result(trial_id, result)
+
+    def on_trial_complete(self, trial_id: str, result=None, error: bool = False, **kwargs) -> None:
+        if trial_id in self.live:
+            self.live.discard(trial_id)
+            self.spent += int((result or {}).get(SPENT, 0) or 0)
+        self.searcher.on_trial_complete(trial_id, result=None if error else result, error=error)
+
+    def get_state(self) -> dict:
+        """Its counts: Tune's SearchGenerator saves a wrapper's state this way (the base searcher's
+        with ``save_to_dir``) and restores it on ``--resume``."""
+        return {"spent": self.spent, "live": sorted(self.live)}
+
+    def set_state(self, state: dict) -> None:
+        self.spent, self.live = int(state["spent"]), set(state["live"])
+
+    def save(self, checkpoint_path: str) -> None:
+        self.searcher.save(checkpoint_path)
+
+    def restore(self, checkpoint_path: str) -> None:
+        self.searcher.restore(checkpoint_path)
+
+
 class SeedRepeater(Repeater):
     """Each configuration Optuna proposes, trained with ``repeat`` seeds (Tune's Repeater: one Tune
     trial, and one MLflow run, per seed; the seed is the repeat's index). Optuna is told once per
@@ -64,10 +114,18 @@ class SeedRepeater(Repeater):
     left out of the means; a configuration whose seeds all failed is told as failed. On resume,
     Tune's SearchGenerator restores the groups (Repeater.get_state) beside Optuna's study."""
 
+    def on_trial_result(self, trial_id, result):
+        # Each seed's env steps so far: what its configuration spent (an env-step budget reads it).
+        if result and ENV_STEPS in result:
+            steps = getattr(self, "_env_steps", None)  # a sweep pickled before this counts from here
+            self._env_steps = {**(steps or {}), trial_id: int(result[ENV_STEPS])}
+
     def on_trial_complete(self, trial_id, result=None, error=False, **kwargs):
         group = self._trial_id_to_group.get(trial_id)
         if group is None:
             return
+        if result and ENV_STEPS in result:
+            self.on_trial_result(trial_id, result)
         # The trial's score (sweeps/score.py: its final 10% of iterations), its last iteration's
         # values where it has none (a trial of a version before the score).
         keys = ((SCORE_RETURN, SCORE_COST, COST_LIMIT) if result and SCORE_RETURN in result
@@ -76,15 +134,19 @@ class SeedRepeater(Repeater):
         group.report(trial_id, tuple(float(result[k]) for k in keys) if ok else (math.nan,) * 3)
         if not group.finished_reporting():
             return
+        steps = getattr(self, "_env_steps", None) or {}
+        spent = sum(steps.get(t, 0) for t, g in self._trial_id_to_group.items() if g is group)
         seeds = [s for s in group.scores() if math.isfinite(s[0])]
         if not seeds:
-            self.searcher.on_trial_complete(group.primary_trial_id, result=None, error=True)
+            # Optuna is told a failure without a result (a multi-objective one would read its values).
+            told = {SPENT: spent} if isinstance(self.searcher, EnvStepBudget) else None
+            self.searcher.on_trial_complete(group.primary_trial_id, result=told, error=True)
             return
         ret, cost, limit = (sum(col) / len(seeds) for col in zip(*seeds))
         # The one objective of a single-objective search, and return and cost of a multi-objective one.
         self.searcher.on_trial_complete(group.primary_trial_id, result={
             METRIC: objective(ret, cost, limit), EPISODE_RETURN: ret, EPISODE_COST: cost, CONSTRAINT: cost - limit,
-            "n_seeds": len(seeds)})
+            "n_seeds": len(seeds), SPENT: spent})
 
 
 def versions() -> dict:
@@ -213,7 +275,10 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
     finally:
         signal.signal(signal.SIGTERM, previous_term)
     n_errors, n_done = grid.num_errors, grid.num_terminated
-    if n_done + n_errors < plan.n_trials:  # stopped by a signal: trials are left to run
+    budget, spent = plan.sweep.env_steps_budget, sum(int((r.metrics or {}).get(ENV_STEPS, 0) or 0) for r in grid)
+    # An env-step budget ends a search before num_samples once no whole configuration more fits.
+    exhausted = budget is not None and spent + len(plan.seeds) * plan.timesteps > budget
+    if n_done + n_errors < plan.n_trials and not exhausted:  # stopped by a signal: trials are left to run
         closed = close_open_children(tracker, parent, "KILLED")
         tracker.client.set_tag(parent, STATUS_TAG, "interrupted")
         tracker.client.set_terminated(parent, status="KILLED")
@@ -227,7 +292,8 @@ def run_sweep(plan: Plan, sweep_dir: Path, commit: str) -> int:
     seed_text = (f"seeds {seeds[0]}..{seeds[-1]}" if seeds == tuple(range(seeds[0], seeds[-1] + 1))
                  else f"seeds {', '.join(map(str, seeds))}")
     outcome = (f"{n_done} of {plan.n_trials} trials finished ({stopped} stopped early by the scheduler), "
-               f"{n_errors} failed; {seed_text}")
+               f"{n_errors} failed; {seed_text}"
+               + (f"; {spent:,} of its {budget:,} env steps spent (env_steps_budget)" if budget is not None else ""))
     close_sweep(tracker, parent, n_errors, heading=f"**Sweep `{plan.name}`**: {outcome}.", plan=plan)
     print(f"sweep done: {outcome}; MLflow parent run {parent}")
     print_links(links, plan.tracking_uri)
@@ -347,7 +413,10 @@ def search_algorithm(plan: Plan) -> SeedRepeater | None:
     optuna_search = ConstrainedOptunaSearch(sampler=sampler,
                                             metric=metric, mode=mode, study_name=plan.name,
                                             storage=optuna.storages.RDBStorage(plan.optuna_storage))
-    return SeedRepeater(optuna_search, repeat=len(plan.seeds))
+    inner = optuna_search
+    if sweep.env_steps_budget is not None:  # drawn while the spent env steps allow a whole configuration more
+        inner = EnvStepBudget(optuna_search, sweep.env_steps_budget, len(plan.seeds) * plan.timesteps)
+    return SeedRepeater(inner, repeat=len(plan.seeds))
 
 
 def _trial_name(trial) -> str:

@@ -523,6 +523,11 @@ class SweepFile(BaseModel):
     """With ``searcher: pbt``: the population, its exploit intervals and ranking window (:class:`PBTSpec`)."""
     num_samples: Int(1, MAX_SAMPLES) | None = None
     """Configurations a search samples (each trained with every seed); default 20."""
+    env_steps_budget: Int(1, MAX_BUDGET * MAX_SAMPLES) | None = None
+    """With a search: the env steps it may spend in all. A configuration is drawn only while what the
+    finished ones spent, plus a full budget for each one running and for the new one, stays within
+    it, so an early stop (``asha``) frees its rest for more draws; ``num_samples`` is then an upper
+    bound. What compares a search with PBT (members × budget) at equal env steps spent."""
     scheduler: Literal["none", "asha"] | None = None
     """``asha`` stops poor configurations early: asynchronous successive halving on a configuration's
     seeds together, their mean objective at equal env steps (sweeps/scheduler.py); default none."""
@@ -671,6 +676,10 @@ class SweepFile(BaseModel):
                              "(a ladder of one limit: cost_limits: [b])")
         if self.search == {}:
             raise KeyedError(("search",), "an empty search; accepted: default, or field → a distribution")
+        if self.env_steps_budget is not None and (self.search is None or self.searcher == "pbt"):
+            raise KeyedError(("env_steps_budget",), "env_steps_budget without a sampling search: it bounds what a "
+                             "search's draws spend; accepted: with search and searcher random, tpe, motpe or nsga2 "
+                             "(PBT spends members × budget)")
         if self.pbt is not None and self.searcher != "pbt":
             raise KeyedError(("pbt",), f"pbt with searcher {self.searcher or 'unset'}: it configures population-based "
                              "training; accepted: with searcher: pbt (or search: pbt)")

@@ -255,6 +255,9 @@ def _refused(tmp_path, text, needle, monkeypatch, capsys, *extra):
      "hidden is not a field ppo_lag can change mid-run; accepted in a schedule: lr, "),
     ("groups:\n  g:\n    schedule: [{at: 500, set: {lr: 0.001}}, {at: 500, set: {lr: 0.002}}]\n",
      "strictly ascending"),
+    ("search: pbt\nenv_steps_budget: 100000\n", "env_steps_budget without a sampling search"),
+    ("search: default\nseeds: 2\nenv_steps_budget: 3000\n",
+     "3,000 is less than one configuration costs (2 seeds × 2,000 env steps); accepted: at least 4,000"),
 ])
 def test_bad_pbt_input_is_refused_before_ray_in_one_line(tmp_path, monkeypatch, capsys, change, needle):
     _refused(tmp_path, "task: lac/PointHazard-v0\nalgo: ppo_lag\nbudget: smoke\n" + change, needle, monkeypatch,

@@ -155,3 +155,53 @@ def test_tpe_reads_the_constraint_it_is_told():
     assert told >= 0.65 > max(blind, rand), (told, blind, rand)
     assert math.isclose(rand, 0.5, abs_tol=0.1)
     assert (round(told, 2), round(blind, 2)) == (0.77, 0.09)  # the figures docs/sweeps.md quotes
+
+
+def test_an_env_step_budget_draws_while_a_whole_configuration_fits_and_an_early_stop_frees_its_rest():
+    """sweeps/sweep.py EnvStepBudget inside the seeds' repeater: 2 seeds × 1,000 env steps per
+    configuration, 5,000 in all. Two configurations run at once (4,000 committed); a third would pass
+    the budget, so the search waits (None), and once one stops early at 500 + 500 (1,000 spent)
+    the third is drawn; the search is finished only when no configuration fits and none runs. Its
+    counts go through Tune's wrapper state."""
+    from ray.tune.search import Searcher
+
+    from sweeps.search import SPENT
+    from sweeps.sweep import EnvStepBudget, SeedRepeater
+
+    class Draws(Searcher):
+        def __init__(self):
+            super().__init__(metric="objective", mode="max")
+            self.n, self.told = 0, []
+
+        def suggest(self, trial_id):
+            self.n += 1
+            return {"x": self.n}
+
+        def on_trial_complete(self, trial_id, result=None, error=False):
+            self.told.append((trial_id, result, error))
+
+    inner = Draws()
+    budget = EnvStepBudget(inner, budget=5_000, per_configuration=2_000)
+    search = SeedRepeater(budget, repeat=2)
+    first = [search.suggest(f"a{i}") for i in range(2)] + [search.suggest(f"b{i}") for i in range(2)]
+    assert [c["x"] for c in first] == [1, 1, 2, 2]
+    assert search.suggest("c0") is None, "a third configuration would pass the budget while two run"
+
+    def finish(trial_id, steps, ret=1.0):
+        search.on_trial_result(trial_id, {"env_steps": steps})
+        search.on_trial_complete(trial_id, {"env_steps": steps, "episode_return": ret, "episode_cost": 0.0,
+                                            "cost_limit": 1.0})
+
+    finish("a0", 500)
+    finish("a1", 500)  # configuration 1 stopped early: 1,000 spent, 2,000 still committed to configuration 2
+    assert inner.told[-1][1][SPENT] == 1_000 and budget.spent == 1_000
+    third = search.suggest("c0")
+    assert third["x"] == 3 and search.suggest("c1")["x"] == 3
+    assert search.suggest("d0") is None  # 1,000 + 2 × 2,000 committed: a fourth would pass 5,000
+    again = EnvStepBudget(Draws(), budget=5_000, per_configuration=2_000)
+    again.set_state(budget.get_state())  # what Tune's SearchGenerator saves of a wrapper and restores
+    assert again.spent == 1_000 and again.live == budget.live
+    for t in ("b0", "b1", "c0", "c1"):
+        finish(t, 1_000)
+    assert budget.spent == 5_000 and not budget.live
+    assert search.suggest("e0") == Searcher.FINISHED
