@@ -23,8 +23,8 @@ from sweeps.sweep_file import SweepFile
 CONFIRM = "confirm"
 #: What a confirmation does not take from the sweep it confirms: how that sweep chose its
 #: configurations (the groups replace it) and its name, seeds, budget and description.
-NOT_CONFIRMED = ("search", "grid", "groups", "groups_at", "searcher", "num_samples", "tune", "pbt", "name", "seeds",
-                 "budget", "description")
+NOT_CONFIRMED = ("search", "grid", "groups", "groups_at", "searcher", "num_samples", "env_steps_budget", "tune", "pbt",
+                 "name", "seeds", "budget", "description")
 
 
 def confirmation_name(name: str) -> str:

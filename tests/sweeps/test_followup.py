@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
+import pytest
 from mlflow.tracking import MlflowClient
 
 from sweeps import followup, sweep_file
@@ -70,3 +71,19 @@ def test_a_finished_sweep_reads_back_once_with_its_summary_and_each_configuratio
     assert len(trials) == 6 and sorted(summary["n_seeds"]) == [3, 3]
     assert followup.fields_of(trials, ("algo", "beta")) == {f"ppo_lag-{g}-PointHazard-v0": {"algo": "ppo_lag"}
                                                            for g in "ab"}
+
+
+@pytest.mark.parametrize("how", [
+    "search: default\nsearcher: random\nnum_samples: 4\nseeds: 1\nenv_steps_budget: 8000\n",
+    "search: pbt\npbt: {members: 2, interval: 1000}\n"])
+def test_a_budgeted_search_and_a_population_are_confirmed_as_grids(how):
+    """What chose the configurations (an env-step budget, a population) stays with the search: the
+    confirmation is a grid of the winners beside the default, on fresh seeds."""
+    from sweeps.followup import confirmation_file
+    from sweeps.sweep_file import SweepFile, load
+
+    sweep = load("s.yaml", "task: lac/PointHazard-v0\nalgo: ppo_lag\nbudget: smoke\n" + how)
+    top = [{"group": "top1", "fields": {"lr": 0.001}}]
+    cfile = confirmation_file(sweep, top, 2, "smoke", "s-confirm")
+    assert isinstance(cfile, SweepFile) and cfile.searcher == "grid" and cfile.env_steps_budget is None
+    assert cfile.pbt is None and set(cfile.groups) == {"top1", "default"}
