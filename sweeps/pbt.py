@@ -112,7 +112,7 @@ class ConstrainedPBT(PopulationBasedTraining):
                          custom_explore_fn=lambda c: clip_to_bounds(c, bounds), log_config=False, synch=True)
         self.intervals = [float(i) for i in intervals]
         self.next_sync = list(self.intervals)  # per sub-population: the env steps of its next exploit
-        self.growth, self.migrate, self.bounds = float(growth), bool(migrate), bounds
+        self.growth, self.migrate = float(growth), bool(migrate)
         self.rng = random.Random(seed)
         self.exploits = [0] * len(intervals)
         self.migrations = 0

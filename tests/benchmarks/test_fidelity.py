@@ -1,7 +1,6 @@
 """benchmarks/fidelity.py's report inputs: runs on disk, and earlier reports' curves whose run
 directories are gone (``--include-curves``); the commands it writes name no machine's paths."""
 
-import importlib.util
 import json
 import re
 import subprocess
@@ -10,15 +9,14 @@ from types import SimpleNamespace
 
 import pytest
 
+from tests.benchmarks.loader import load_benchmark
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def fidelity():
-    spec = importlib.util.spec_from_file_location("fidelity_benchmark", ROOT / "benchmarks" / "fidelity.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("fidelity")
 
 
 # An absolute path in a command: a word (or a --set value) that starts with "/" or a drive letter.

@@ -1,11 +1,12 @@
 """benchmarks/pbt_evidence.py: each committed folder of docs/pbt-evidence renders its results.md
 again from its CSVs alone, and the README quotes only what those tables say."""
 
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
+
+from tests.benchmarks.loader import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[2]
 FOLDERS = sorted(p.parent for p in (ROOT / "docs" / "pbt-evidence").glob("*/results.md"))
@@ -13,10 +14,7 @@ FOLDERS = sorted(p.parent for p in (ROOT / "docs" / "pbt-evidence").glob("*/resu
 
 @pytest.fixture(scope="module")
 def evidence():
-    spec = importlib.util.spec_from_file_location("pbt_evidence_benchmark", ROOT / "benchmarks" / "pbt_evidence.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("pbt_evidence")
 
 
 @pytest.mark.parametrize("folder", FOLDERS, ids=[f.name for f in FOLDERS])
