@@ -332,7 +332,10 @@ class SweepTrial(tune.Trainable):
         again (lac_rllib/constrained/changeable.py), the donor's record inherited and the copy
         recorded as this member's parent (``lac.pbt.parents``)."""
         path = os.path.join(checkpoint, MEMBER_FILE)
-        saved = json.load(open(path)) if os.path.exists(path) else None
+        saved = None
+        if os.path.exists(path):
+            with open(path) as f:
+                saved = json.load(f)
         due = fields_at(self.schedule, saved["env_steps"]) if saved else self.changes
         if due != self.changes:  # a replay resumed past a change: built with the fields due there
             self.algo.stop()
